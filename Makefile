@@ -1,0 +1,31 @@
+# The README's two commands. Each installs missing Debian packages, configures and builds first.
+BUILD ?= build
+JOBS ?= $(shell nproc)
+GRAINS := $(BUILD)/grains
+
+.PHONY: deps configure build demo test bench clean format
+
+deps:
+	bash scripts/install-deps.sh
+
+configure: deps
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release
+
+build: configure
+	cmake --build $(BUILD) -j $(JOBS)
+
+demo: build
+	$(GRAINS) run graphs/default.json --out out/demo
+	@echo "demo: frames and stats.csv are in out/demo"
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+bench: build
+	$(GRAINS) bench --out out/bench
+
+clean:
+	rm -rf $(BUILD) out
+
+format:
+	find engine nodes app tests bench viewer-offline -name '*.cpp' -o -name '*.h' | xargs clang-format -i

@@ -1,0 +1,46 @@
+// Geometry files: PLY frames (DESIGN §6) and PLY/OBJ inputs for sources, targets and colliders.
+#pragma once
+#include <array>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "engine/particles.h"
+
+namespace grains {
+
+// Bad or unreadable geometry file; what() names the file and what is wrong.
+struct GeometryError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Writes one frame as binary little-endian PLY, DESIGN §6:
+//   element vertex: float x y z, float vx vy vz, float pscale, int id, then each requested attribute
+//     (Float → float NAME, Int → int NAME, Vec3 → float NAME_x NAME_y NAME_z); a requested attribute
+//     that the store lacks is written with its documented default;
+//   element edge: int vertex1 vertex2, float restlength strain (one per primitive).
+// Written to PATH.tmp then renamed, so a killed run never leaves a half-written frame.
+void write_ply(const std::string& path, const ParticleStore& pts,
+               const std::vector<std::string>& attributes);
+// Same, with every attribute the store holds (used by `grains cook`).
+void write_ply_all(const std::string& path, const ParticleStore& pts);
+
+// Reads a PLY file (ascii, binary_little_endian or binary_big_endian) into a particle store.
+// Vertex properties: x y z → P; vx vy vz → v; NAME_x NAME_y NAME_z → Vec3 NAME; other float or
+// double properties → Float; integer properties → Int (id included; ids are assigned when absent
+// and next_id is set past the largest). Edge element (vertex1 vertex2, plus float properties →
+// primitive attributes) → primitives; a missing restlength is the distance at load.
+// Throws GeometryError (file + what) for a missing file, bad header, no x/y/z, a known attribute
+// of the wrong type (e.g. an int pscale), edge indices out of range, truncated data.
+ParticleStore read_ply(const std::string& path);
+
+struct Mesh {
+  std::vector<Vec3> vertices;
+  std::vector<std::array<int, 3>> triangles;  // polygons are fan-triangulated
+};
+// Reads a Wavefront OBJ (v and f lines; f may use v/vt/vn and negative indices).
+Mesh read_obj(const std::string& path);
+// Reads points from .ply (vertex positions) or .obj (vertices) by extension.
+Mesh read_mesh(const std::string& path);
+
+}  // namespace grains

@@ -1,0 +1,5 @@
+#include "app/cli.h"
+
+namespace grains {
+int cli_main(int, char**) { return 1; }
+}  // namespace grains

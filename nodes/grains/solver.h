@@ -1,0 +1,95 @@
+// The grains PBD solver (DESIGN §4, the POP Grains help page): one substep over a compact set of
+// grains. The grains node gathers the particles of its stream/group into GrainsData, calls
+// GrainsSolver::substep, and scatters P, v (and shockmass) back.
+//
+// Design: Jacobi iterations with gather-style corrections. Every particle reads the previous
+// iterate of its neighbours and writes only its own next iterate, so the result is the same for
+// any thread count (no atomics), and the per-particle math lives in kernels/*.h, written in the
+// common subset of C++ and OpenCL C, so an OpenCL path compiles the same source.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "engine/collider.h"
+#include "engine/neighbors.h"
+
+namespace grains {
+
+enum class MassShock { Off = 0, Global = 1, Local = 2 };
+
+// Parameters of one substep, already evaluated (expressions resolved) by the node.
+struct GrainsSettings {
+  float dt = 1.0f / 48;       // substep length (s)
+  int substeps = 1;           // the solver's substeps per frame (stiffness scaling)
+  int constraint_iterations = 10;
+  float particle_separation = 0.1f;  // mean diameter hint (m): missing pscale and mass-shock scale
+  bool assume_uniform_radius = true;
+  // friction
+  float friction_with_colliders = 1.0f;  // x `friction` point attribute
+  float friction_with_particles = 1.0f;  // x `friction` point attribute
+  bool accurate_friction = false;        // friction every iteration instead of once after
+  float static_threshold = 1.0f;         // |dx_t| < static_threshold * overlap: stick
+  float scale_kinetic = 0.5f;            // else remove min(1, scale_kinetic * overlap / |dx_t|)
+  // internal collisions
+  float repulsion_weight = 1.0f;      // x repulsionweight
+  float repulsion_stiffness = 1000.0f;  // x repulsionstiffness
+  // mass-shock scaling
+  MassShock mass_shock = MassShock::Off;
+  float shock_scaling_power = 1.0f;
+  Vec3 shock_axis{0, 1, 0};
+  Vec3 shock_origin{0, 0, 0};
+  // clumping
+  float clumping_weight = 0.0f;     // x attractionweight
+  float clumping_stiffness = 100.0f;  // x attractionstiffness
+  // solver controls
+  int max_neighbors = 32;
+  float neighbor_query_scale = 1.5f;
+  float max_speed = 1e6f;         // m/s, caps the reported v only
+  float max_acceleration = 1e6f;  // m/s^2, caps the constraint-induced change of v per substep
+  float drift_threshold = 0.0f;   // m/s: slower particles stay where they were
+  float velocity_blend = 0.0f;    // 0: v from the positions; 1: keep the predicted v
+  float over_relaxation = 1.0f;
+  bool update_collisions_during_iterations = false;
+  bool update_neighbors_during_iterations = false;
+  bool final_collision_test = true;
+  bool disable_constraint_averaging = false;
+  int threads = 0;  // 0: OpenMP default
+};
+
+// Compact per-grain arrays (n grains). Optional attribute arrays are nullptr when the point
+// attribute is missing (= 1, the help page's default scale).
+struct GrainsData {
+  size_t n = 0;
+  float* P = nullptr;       // (n x 3) m, in: start of substep, out: end
+  float* v = nullptr;       // (n x 3) m/s, in/out
+  const float* force = nullptr;  // (n x 3) N
+  const float* mass = nullptr;   // (n) kg
+  const float* pscale = nullptr;  // (n) m, radius
+  const float* friction = nullptr;             // (n) optional
+  const float* repulsionweight = nullptr;      // (n) optional
+  const float* repulsionstiffness = nullptr;   // (n) optional
+  const float* attractionweight = nullptr;     // (n) optional
+  const float* attractionstiffness = nullptr;  // (n) optional
+  float* shockmass = nullptr;  // (n) out when mass_shock == Global (may be nullptr otherwise)
+};
+
+// Per-substep diagnostics.
+struct GrainsStats {
+  float max_penetration = 0;   // max overlap / (r_i + r_j) over pairs after the substep
+  float mean_penetration = 0;  // mean over overlapping pairs
+  size_t contacts = 0;         // overlapping pairs
+};
+
+class GrainsSolver {
+ public:
+  void substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
+               size_t collider_count, GrainsStats* stats = nullptr);
+
+ private:
+  NeighborSearch search_;
+  NeighborList neighbors_;
+  std::vector<float> p_, p_next_, P0_, inv_mass_, plane_;  // scratch, reused between substeps
+  std::vector<int32_t> plane_collider_;
+};
+
+}  // namespace grains

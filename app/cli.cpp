@@ -1,5 +1,223 @@
+// The grains program (DESIGN §5). Exit codes: 0 success, 2 bad input, 1 failure while running.
 #include "app/cli.h"
 
+#include <omp.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+
+#include "engine/cook.h"
+#include "engine/geometry_io.h"
+#include "engine/graph.h"
+#include "engine/simulation.h"
+#include "nodes/register.h"
+
 namespace grains {
-int cli_main(int, char**) { return 1; }
+namespace {
+
+constexpr int kBadInput = 2;
+constexpr int kRunFailure = 1;
+
+std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
+  std::vector<Override> out;
+  for (const auto& s : sets) out.push_back(parse_override(s));
+  return out;
+}
+
+void progress(int done, int total, double ms, size_t points) {
+  int width = 30;
+  int filled = total > 0 ? done * width / total : width;
+  std::fprintf(stderr, "\r[%.*s%*s] %d/%d frames  %zu points  %.1f ms/frame ", filled,
+               "##############################", width - filled, "", done, total, points, ms);
+  if (done == total) std::fputc('\n', stderr);
+  std::fflush(stderr);
+}
+
+int cmd_run(const std::string& path, const std::string& out_override, int frames_override,
+            int threads, const std::vector<std::string>& sets, bool quiet) {
+  Graph g = load_graph(path, parse_overrides(sets));
+  if (frames_override > 0) g.frames = frames_override;
+  std::string out = out_override.empty() ? g.output.dir : out_override;
+  Simulation sim(g, threads);
+  std::vector<std::unique_ptr<FrameWriter>> writers;
+  for (size_t k = 0; k < sim.object_count(); ++k) {
+    std::string dir = sim.object_count() == 1 ? out : out + "/" + sim.object(k).name;
+    writers.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+  }
+  bool tty = isatty(fileno(stderr)) && !quiet;
+  for (int f = 1; f <= g.frames; ++f) {
+    sim.step_frame();
+    size_t points = 0;
+    double ms = 0;
+    for (size_t k = 0; k < sim.object_count(); ++k) {
+      const SimObject& o = sim.object(k);
+      writers[k]->write(f, o.pts, o.stats, f % g.output.every == 0);
+      points += o.pts.size();
+      ms += o.stats.wall_ms;
+    }
+    if (tty)
+      progress(f, g.frames, ms, points);
+    else if (!quiet)
+      std::fprintf(stderr, "frame %d/%d  points %zu  %.1f ms  max_penetration %.4f\n", f, g.frames,
+                   points, ms, sim.object(0).stats.max_penetration);
+  }
+  if (!quiet) std::fprintf(stderr, "wrote %s\n", out.c_str());
+  return 0;
+}
+
+void print_nodes(const std::string& only, bool markdown) {
+  bool found = false;
+  for (const NodeTypeInfo* t : node_types()) {
+    if (!only.empty() && t->type != only) continue;
+    found = true;
+    if (markdown) {
+      std::cout << "## " << t->type << "\n\n" << t->doc << "\n\n";
+      if (t->params.empty()) {
+        std::cout << "No parameters.\n\n";
+        continue;
+      }
+      std::cout << "| parameter | type | default | range | units | scaled by | meaning |\n"
+                << "| --- | --- | --- | --- | --- | --- | --- |\n";
+      for (const auto& p : t->params) {
+        std::string range;
+        if (p.has_min) range += (p.min_exclusive ? "> " : ">= ") + std::to_string(p.min).substr(0, 6);
+        if (p.has_max) range += (range.empty() ? "" : ", ") + ("<= " + std::to_string(p.max).substr(0, 6));
+        if (p.type == ParamType::Menu) {
+          for (size_t k = 0; k < p.menu.size(); ++k) range += (k ? " \\| " : "") + p.menu[k];
+        }
+        std::cout << "| `" << p.name << "` | " << param_type_name(p.type) << " | `"
+                  << p.default_text() << "` | " << range << " | " << p.units << " | "
+                  << (p.scale_attribute.empty() ? "" : "`" + p.scale_attribute + "`") << " | "
+                  << p.doc << " |\n";
+      }
+      std::cout << "\n";
+    } else {
+      std::cout << t->type << ": " << t->doc << "\n";
+      for (const auto& p : t->params) {
+        std::cout << "  " << p.name << " (" << param_type_name(p.type) << ", default "
+                  << p.default_text();
+        if (!p.units.empty()) std::cout << ", " << p.units;
+        if (!p.scale_attribute.empty()) std::cout << ", scaled by " << p.scale_attribute;
+        std::cout << ")\n      " << p.doc << "\n";
+        if (p.type == ParamType::Menu) {
+          std::cout << "      one of:";
+          for (auto& m : p.menu) std::cout << " " << m;
+          std::cout << "\n";
+        }
+      }
+      std::cout << "\n";
+    }
+  }
+  if (!found) throw LoadError("nodes", "", "unknown node type '" + only + "'");
+}
+
+int cmd_cook(const std::string& type, const std::string& in, const std::vector<std::string>& sets,
+             int substeps, int frames, bool has_ground, float ground_y, int threads,
+             const std::string& out) {
+  ParticleStore pts = read_ply(in);
+  std::vector<std::pair<std::string, std::string>> params;
+  for (const auto& s : sets) {
+    auto eq = s.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw LoadError(in, "--set", "'" + s + "' is not PARAM=VALUE");
+    params.push_back({s.substr(0, eq), s.substr(eq + 1)});
+  }
+  CookOptions o;
+  o.substeps = substeps;
+  o.frames = frames;
+  o.ground = has_ground;
+  o.ground_y = ground_y;
+  o.threads = threads;
+  o.out_dir = out;
+  o.source = "cook " + type;
+  cook_node(type, params, pts, o);
+  std::fprintf(stderr, "cooked %s on %zu points; wrote %s\n", type.c_str(), pts.size(), out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int cli_main(int argc, char** argv) {
+  register_builtin_nodes();
+  CLI::App app{"grains: runs JSON node graphs of particles; the grains node is a PBD granular solver"};
+  app.require_subcommand(1);
+
+  std::string graph_path, out, in, type, cook_out;
+  int frames = 0, threads = 0, substeps = 1, cook_frames = 1;
+  bool quiet = false, markdown = false, opencl = false;
+  float ground = 0;
+  std::vector<std::string> sets;
+
+  auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
+  run->add_option("graph", graph_path, "graph file (JSON)")->required();
+  run->add_option("--out", out, "output folder (default: the graph's output.dir)");
+  run->add_option("--frames", frames, "number of frames (default: the graph's)")->check(CLI::PositiveNumber);
+  run->add_option("--threads", threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
+  run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
+  run->add_flag("--quiet", quiet, "print nothing but errors");
+
+  auto* validate = app.add_subcommand("validate", "load and check a graph without running it");
+  validate->add_option("graph", graph_path, "graph file (JSON)")->required();
+
+  std::string only;
+  auto* nodes = app.add_subcommand("nodes", "print node types and their parameters");
+  nodes->add_option("type", only, "one node type");
+  nodes->add_flag("--markdown", markdown, "print Markdown tables");
+
+  auto* cook = app.add_subcommand("cook", "run one node type on the points of a PLY file");
+  cook->add_option("type", type, "node type")->required();
+  cook->add_option("--in", in, "input points (PLY; edges become constraints)")->required();
+  cook->add_option("--set", sets, "PARAM=VALUE");
+  cook->add_option("--substeps", substeps, "substeps per frame")->check(CLI::PositiveNumber);
+  cook->add_option("--frames", cook_frames, "frames")->check(CLI::PositiveNumber);
+  auto* ground_opt = cook->add_option("--ground", ground, "add a ground plane at this height");
+  cook->add_option("--threads", threads, "worker threads")->check(CLI::PositiveNumber);
+  cook->add_option("--out", cook_out, "output folder")->required();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    int rc = app.exit(e);
+    return rc == 0 ? 0 : kBadInput;
+  }
+
+  try {
+    if (run->parsed()) {
+      if (opencl) {
+        std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
+        return kBadInput;
+      }
+      return cmd_run(graph_path, out, frames, threads, sets, quiet);
+    }
+    if (validate->parsed()) {
+      Graph g = load_graph(graph_path);
+      std::printf("%s: ok (%zu nodes, %zu solvers, %d frames at %g fps)\n", graph_path.c_str(),
+                  g.nodes.size(), g.solvers.size(), g.frames, g.fps);
+      return 0;
+    }
+    if (nodes->parsed()) {
+      print_nodes(only, markdown);
+      return 0;
+    }
+    if (cook->parsed())
+      return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
+                      threads, cook_out);
+  } catch (const LoadError& e) {
+    std::fprintf(stderr, "grains: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const GeometryError& e) {
+    std::fprintf(stderr, "grains: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "grains: failed: %s\n", e.what());
+    return kRunFailure;
+  }
+  return 0;
+}
+
 }  // namespace grains

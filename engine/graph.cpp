@@ -1,0 +1,407 @@
+#include "engine/graph.h"
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+namespace grains {
+
+using json = nlohmann::json;
+
+LoadError::LoadError(std::string f, std::string p, std::string m)
+    : std::runtime_error(f + ": " + (p.empty() ? "" : p + ": ") + m),
+      file(std::move(f)),
+      pointer(std::move(p)),
+      message(std::move(m)) {}
+
+int Graph::find(const std::string& node_name) const {
+  for (size_t k = 0; k < nodes.size(); ++k)
+    if (nodes[k].name == node_name) return static_cast<int>(k);
+  return -1;
+}
+
+Override parse_override(const std::string& text) {
+  auto eq = text.find('=');
+  auto dot = text.find('.');
+  if (eq == std::string::npos || dot == std::string::npos || dot > eq || dot == 0 || dot + 1 == eq)
+    throw LoadError("--set", "", "'" + text + "' is not NODE.PARAM=VALUE");
+  return {text.substr(0, dot), text.substr(dot + 1, eq - dot - 1), text.substr(eq + 1)};
+}
+
+namespace {
+
+std::string type_of(const json& j) {
+  if (j.is_null()) return "null";
+  if (j.is_boolean()) return "a boolean";
+  if (j.is_number()) return "a number";
+  if (j.is_string()) return "a string";
+  if (j.is_array()) return "an array";
+  return "an object";
+}
+
+struct Loader {
+  std::string file;
+
+  [[noreturn]] void fail(const std::string& pointer, const std::string& msg) const {
+    throw LoadError(file, pointer, msg);
+  }
+
+  void check_range(const ParamDecl& d, double v, const std::string& ptr) const {
+    if (d.has_min && (d.min_exclusive ? !(v > d.min) : !(v >= d.min)))
+      fail(ptr, "'" + d.name + "' must be " + (d.min_exclusive ? "greater than " : "at least ") +
+                    json(d.min).dump() + ", got " + json(v).dump());
+    if (d.has_max && !(v <= d.max))
+      fail(ptr, "'" + d.name + "' must be at most " + json(d.max).dump() + ", got " +
+                    json(v).dump());
+  }
+
+  ChannelSource channel(const ParamDecl& d, const json& j, const std::vector<std::string>& names,
+                        const std::string& ptr) const {
+    ChannelSource c;
+    if (j.is_number()) {
+      c.value = j.get<double>();
+      if (d.type == ParamType::Int && c.value != std::floor(c.value))
+        fail(ptr, "'" + d.name + "' is an integer, got " + j.dump());
+      if (d.type == ParamType::Toggle && c.value != 0 && c.value != 1)
+        fail(ptr, "'" + d.name + "' is a toggle: true, false, 0, 1 or an expression");
+      check_range(d, c.value, ptr);
+      return c;
+    }
+    if (j.is_boolean()) {
+      if (d.type != ParamType::Toggle)
+        fail(ptr, "'" + d.name + "' is " + param_type_name(d.type) + ", got a boolean");
+      c.value = j.get<bool>() ? 1 : 0;
+      return c;
+    }
+    if (j.is_string()) {
+      c.kind = ChannelSource::Kind::Expression;
+      c.text = j.get<std::string>();
+      try {
+        Expression probe(c.text, names);
+      } catch (const std::exception& e) {
+        fail(ptr, "expression does not parse: " + std::string(e.what()));
+      }
+      return c;
+    }
+    if (j.is_object()) {
+      c.kind = ChannelSource::Kind::Keys;
+      for (auto it = j.begin(); it != j.end(); ++it)
+        if (it.key() != "keys" && it.key() != "interp")
+          fail(ptr + "/" + it.key(), "unknown keyframe field '" + it.key() + "'");
+      if (!j.contains("keys") || !j["keys"].is_array() || j["keys"].empty())
+        fail(ptr + "/keys", "keyframes need a non-empty 'keys' array of [seconds, value]");
+      const json& keys = j["keys"];
+      for (size_t k = 0; k < keys.size(); ++k) {
+        const json& kv = keys[k];
+        std::string kp = ptr + "/keys/" + std::to_string(k);
+        if (!kv.is_array() || kv.size() != 2 || !kv[0].is_number() || !kv[1].is_number())
+          fail(kp, "a key is [seconds, value], got " + kv.dump());
+        double t = kv[0].get<double>();
+        if (!c.keys.keys.empty() && !(t > c.keys.keys.back().first))
+          fail(kp, "key times must increase strictly");
+        c.keys.keys.push_back({t, kv[1].get<double>()});
+      }
+      std::string interp = "linear";
+      if (j.contains("interp")) {
+        if (!j["interp"].is_string()) fail(ptr + "/interp", "interp is \"linear\" or \"cubic\"");
+        interp = j["interp"].get<std::string>();
+      }
+      if (interp != "linear" && interp != "cubic")
+        fail(ptr + "/interp", "interp is \"linear\" or \"cubic\", got \"" + interp + "\"");
+      c.keys.cubic = interp == "cubic";
+      return c;
+    }
+    fail(ptr, "'" + d.name + "' is " + param_type_name(d.type) + ", got " + type_of(j));
+  }
+
+  ParamValue value(const ParamDecl& d, const json& j, const std::vector<std::string>& names,
+                   const std::string& ptr) const {
+    ParamValue v;
+    switch (d.type) {
+      case ParamType::Float:
+      case ParamType::Int:
+      case ParamType::Toggle:
+        v.channels.push_back(channel(d, j, names, ptr));
+        break;
+      case ParamType::Vec3:
+        if (!j.is_array() || j.size() != 3)
+          fail(ptr, "'" + d.name + "' is a vector of 3 components, got " +
+                        (j.is_array() ? std::to_string(j.size()) + " components" : type_of(j)));
+        for (int k = 0; k < 3; ++k)
+          v.channels.push_back(channel(d, j[k], names, ptr + "/" + std::to_string(k)));
+        break;
+      case ParamType::String:
+        if (!j.is_string()) fail(ptr, "'" + d.name + "' is a string, got " + type_of(j));
+        v.text = j.get<std::string>();
+        break;
+      case ParamType::Menu: {
+        if (!j.is_string()) fail(ptr, "'" + d.name + "' is a string, got " + type_of(j));
+        v.text = j.get<std::string>();
+        bool ok = false;
+        std::string choices;
+        for (auto& m : d.menu) {
+          ok = ok || m == v.text;
+          choices += (choices.empty() ? "" : ", ") + ("\"" + m + "\"");
+        }
+        if (!ok) fail(ptr, "'" + d.name + "' must be one of " + choices + ", got \"" + v.text + "\"");
+        break;
+      }
+      case ParamType::StringList:
+        if (!j.is_array()) fail(ptr, "'" + d.name + "' is an array of strings, got " + type_of(j));
+        for (size_t k = 0; k < j.size(); ++k) {
+          if (!j[k].is_string())
+            fail(ptr + "/" + std::to_string(k), "expected a string, got " + type_of(j[k]));
+          v.list.push_back(j[k].get<std::string>());
+        }
+        break;
+    }
+    return v;
+  }
+
+  static void allow_keys(const Loader& l, const json& obj, const std::string& ptr,
+                         std::initializer_list<const char*> keys) {
+    for (auto it = obj.begin(); it != obj.end(); ++it) {
+      bool ok = false;
+      for (const char* k : keys) ok = ok || it.key() == k;
+      if (!ok) l.fail(ptr + "/" + it.key(), "unknown field '" + it.key() + "'");
+    }
+  }
+
+  Graph load(json root, const std::vector<Override>& overrides) {
+    Graph g;
+    g.file = file;
+    g.base_dir = std::filesystem::path(file).parent_path().string();
+    if (!root.is_object()) fail("", "the graph must be a JSON object");
+    allow_keys(*this, root, "", {"grains_graph", "name", "fps", "frames", "seed", "nodes", "output"});
+    if (!root.contains("grains_graph")) fail("/grains_graph", "missing: this file is not a grains graph");
+    if (!root["grains_graph"].is_number_integer() || root["grains_graph"].get<int64_t>() != 1)
+      fail("/grains_graph", "unsupported version " + root["grains_graph"].dump() + " (expected 1)");
+    if (root.contains("name")) {
+      if (!root["name"].is_string()) fail("/name", "name is a string");
+      g.name = root["name"].get<std::string>();
+    } else {
+      g.name = std::filesystem::path(file).stem().string();
+    }
+    if (root.contains("fps")) {
+      if (!root["fps"].is_number()) fail("/fps", "fps is a number, got " + type_of(root["fps"]));
+      g.fps = root["fps"].get<double>();
+      if (!(g.fps > 0)) fail("/fps", "fps must be greater than 0, got " + root["fps"].dump());
+    }
+    if (root.contains("frames")) {
+      if (!root["frames"].is_number_integer())
+        fail("/frames", "frames is an integer, got " + root["frames"].dump());
+      int64_t f = root["frames"].get<int64_t>();
+      if (f <= 0) fail("/frames", "frames must be at least 1, got " + std::to_string(f));
+      g.frames = static_cast<int>(f);
+    }
+    if (root.contains("seed")) {
+      if (!root["seed"].is_number_integer() || root["seed"].get<int64_t>() < 0)
+        fail("/seed", "seed is a non-negative integer");
+      g.seed = root["seed"].get<uint64_t>();
+    }
+    if (!root.contains("nodes") || !root["nodes"].is_array())
+      fail("/nodes", "the graph needs a 'nodes' array");
+    json& nodes = root["nodes"];
+
+    // overrides apply to the authored JSON, so they are validated like everything else
+    for (const auto& o : overrides) {
+      bool found = false;
+      for (auto& n : nodes)
+        if (n.is_object() && n.contains("name") && n["name"] == o.node) {
+          json v;
+          try {
+            v = json::parse(o.value);
+          } catch (const json::exception&) {
+            v = o.value;
+          }
+          n["params"][o.param] = v;
+          found = true;
+        }
+      if (!found) throw LoadError("--set", "", "no node named '" + o.node + "' in " + file);
+    }
+
+    std::map<std::string, int> by_name;
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const json& n = nodes[k];
+      std::string ptr = "/nodes/" + std::to_string(k);
+      if (!n.is_object()) fail(ptr, "a node is an object, got " + type_of(n));
+      allow_keys(*this, n, ptr, {"name", "type", "inputs", "params"});
+      if (!n.contains("name") || !n["name"].is_string() || n["name"].get<std::string>().empty())
+        fail(ptr + "/name", "every node needs a non-empty string name");
+      NodeDesc d;
+      d.name = n["name"].get<std::string>();
+      d.pointer = ptr;
+      if (by_name.count(d.name)) fail(ptr + "/name", "duplicate node name '" + d.name + "'");
+      by_name[d.name] = static_cast<int>(k);
+      if (!n.contains("type") || !n["type"].is_string()) fail(ptr + "/type", "every node needs a string type");
+      d.type = n["type"].get<std::string>();
+      d.info = find_node_type(d.type);
+      if (!d.info) {
+        std::string known;
+        for (auto* t : node_types()) known += (known.empty() ? "" : ", ") + t->type;
+        fail(ptr + "/type", "unknown node type '" + d.type + "' (known: " + known + ")");
+      }
+      std::vector<std::string> names;
+      for (const auto& p : d.info->params)
+        for (auto& c : p.channel_names()) names.push_back(c);
+      if (n.contains("params")) {
+        const json& params = n["params"];
+        if (!params.is_object()) fail(ptr + "/params", "params is an object");
+        for (auto it = params.begin(); it != params.end(); ++it) {
+          std::string pp = ptr + "/params/" + it.key();
+          const ParamDecl* decl = d.info->find_param(it.key());
+          if (!decl)
+            fail(pp, "unknown parameter '" + it.key() + "' for node type '" + d.type +
+                         "' (see `grains nodes " + d.type + "`)");
+          d.params[it.key()] = value(*decl, it.value(), names, pp);
+        }
+      }
+      g.nodes.push_back(std::move(d));
+    }
+
+    // inputs: exist, are not colliders or solvers, and hold no cycle
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const json& n = nodes[k];
+      NodeDesc& d = g.nodes[k];
+      std::string ptr = d.pointer + "/inputs";
+      if (!n.contains("inputs")) continue;
+      if (!n["inputs"].is_array()) fail(ptr, "inputs is an array of node names");
+      if (d.info->role == NodeRole::Collider && !n["inputs"].empty())
+        fail(ptr, "a collider takes no inputs");
+      for (size_t i = 0; i < n["inputs"].size(); ++i) {
+        const json& in = n["inputs"][i];
+        std::string ip = ptr + "/" + std::to_string(i);
+        if (!in.is_string()) fail(ip, "an input is a node name, got " + type_of(in));
+        auto it = by_name.find(in.get<std::string>());
+        if (it == by_name.end()) fail(ip, "input '" + in.get<std::string>() + "' names no node");
+        NodeRole r = g.nodes[it->second].info->role;
+        if (r == NodeRole::Collider || r == NodeRole::Solver)
+          fail(ip, "input '" + in.get<std::string>() + "' is a " +
+                       (r == NodeRole::Collider ? "collider" : "solver") +
+                       ": colliders are listed in a solver's 'colliders', solvers end chains");
+        d.inputs.push_back(it->second);
+      }
+    }
+    std::vector<int> state(g.nodes.size(), 0);  // 0 new, 1 on stack, 2 done
+    std::function<void(int)> visit = [&](int k) {
+      state[k] = 1;
+      for (size_t i = 0; i < g.nodes[k].inputs.size(); ++i) {
+        int in = g.nodes[k].inputs[i];
+        if (state[in] == 1)
+          fail(g.nodes[k].pointer + "/inputs/" + std::to_string(i),
+               "cycle: '" + g.nodes[k].name + "' depends on itself through '" + g.nodes[in].name + "'");
+        if (state[in] == 0) visit(in);
+      }
+      state[k] = 2;
+    };
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      if (state[k] == 0) visit(static_cast<int>(k));
+
+    // solvers: colliders named exist; every chain node reaches a solver
+    std::vector<char> reaches(g.nodes.size(), 0);
+    std::function<void(int)> mark = [&](int k) {
+      if (reaches[k]) return;
+      reaches[k] = 1;
+      for (int in : g.nodes[k].inputs) mark(in);
+    };
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      NodeDesc& d = g.nodes[k];
+      if (d.info->role != NodeRole::Solver) continue;
+      g.solvers.push_back(static_cast<int>(k));
+      mark(static_cast<int>(k));
+      auto it = d.params.find("colliders");
+      if (it == d.params.end()) continue;
+      for (size_t c = 0; c < it->second.list.size(); ++c) {
+        const std::string& cn = it->second.list[c];
+        int ci = g.find(cn);
+        std::string cp = d.pointer + "/params/colliders/" + std::to_string(c);
+        if (ci < 0) fail(cp, "collider '" + cn + "' names no node");
+        if (g.nodes[ci].info->role != NodeRole::Collider)
+          fail(cp, "'" + cn + "' is a " + g.nodes[ci].type + " node, not a collider");
+      }
+    }
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const NodeDesc& d = g.nodes[k];
+      if (d.info->role == NodeRole::Collider || reaches[k]) continue;
+      fail(d.pointer, "node '" + d.name + "' is in no chain that reaches a solver");
+    }
+    if (g.solvers.empty()) fail("/nodes", "the graph has no solver node");
+
+    // node-specific checks (files exist, ...), with defaults filled in
+    for (const auto& d : g.nodes) {
+      if (!d.info->check) continue;
+      ParamSet ps(d.info->params, d.params);
+      ps.evaluate(ExprVars{});
+      auto [msg, param] = d.info->check(ps, g.base_dir);
+      if (!msg.empty()) fail(d.pointer + (param.empty() ? "" : "/params/" + param), msg);
+    }
+
+    if (root.contains("output")) {
+      const json& o = root["output"];
+      if (!o.is_object()) fail("/output", "output is an object");
+      allow_keys(*this, o, "/output", {"dir", "every", "attributes"});
+      if (o.contains("dir")) {
+        if (!o["dir"].is_string() || o["dir"].get<std::string>().empty())
+          fail("/output/dir", "dir is a non-empty string");
+        g.output.dir = o["dir"].get<std::string>();
+      }
+      if (o.contains("every")) {
+        if (!o["every"].is_number_integer() || o["every"].get<int64_t>() < 1)
+          fail("/output/every", "every is an integer of at least 1");
+        g.output.every = o["every"].get<int>();
+      }
+      if (o.contains("attributes")) {
+        if (!o["attributes"].is_array()) fail("/output/attributes", "attributes is an array of names");
+        for (size_t k = 0; k < o["attributes"].size(); ++k) {
+          const json& a = o["attributes"][k];
+          if (!a.is_string() || a.get<std::string>().empty())
+            fail("/output/attributes/" + std::to_string(k), "an attribute is a non-empty name");
+          g.output.attributes.push_back(a.get<std::string>());
+        }
+      }
+    } else {
+      g.output.dir = "out/" + g.name;
+    }
+    return g;
+  }
+};
+
+}  // namespace
+
+ParamValue parse_param_value(const ParamDecl& decl, const std::string& json_text,
+                             const std::vector<std::string>& channel_names, const std::string& file,
+                             const std::string& pointer) {
+  json v;
+  try {
+    v = json::parse(json_text);
+  } catch (const json::exception&) {
+    v = json_text;
+  }
+  Loader l{file};
+  return l.value(decl, v, channel_names, pointer);
+}
+
+Graph parse_graph(const std::string& text, const std::string& file,
+                  const std::vector<Override>& overrides) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw LoadError(file, "", std::string("malformed JSON: ") + e.what());
+  }
+  Loader l{file};
+  return l.load(std::move(root), overrides);
+}
+
+Graph load_graph(const std::string& path, const std::vector<Override>& overrides) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw LoadError(path, "", "cannot open the graph file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return parse_graph(ss.str(), path, overrides);
+}
+
+}  // namespace grains

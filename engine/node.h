@@ -1,0 +1,87 @@
+// Node types and the context a node cooks in. Each node type registers one NodeTypeInfo: its
+// parameter table, its role in a chain and a factory. Nodes never read JSON: the evaluator hands
+// them evaluated parameters and the object's particles.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/collider.h"
+#include "engine/params.h"
+#include "engine/particles.h"
+
+namespace grains {
+
+// What the evaluator knows of the current moment.
+struct TimeInfo {
+  double fps = 24;
+  int substeps = 1;
+  int frame = 1;      // 1-based frame being computed (ends at time frame / fps)
+  int substep = 0;    // 0-based substep within the frame
+  double dt = 0;      // substep length (s)
+  double st = 0;      // simulation time at the start of this substep (s)
+};
+
+// Diagnostics a node may report for the frame's stats row.
+struct CookStats {
+  float max_penetration = 0;
+  float mean_penetration = 0;
+  float max_strain = 0;
+};
+
+struct CookContext {
+  ParticleStore& pts;
+  const ParamSet& params;
+  const TimeInfo& time;
+  const std::vector<ColliderState>& colliders;  // the solver's colliders at this substep
+  // Points this node acts on: those of the streams of its chain, or every point when the chain
+  // above it holds no stream generator. Refreshed by the evaluator before each cook.
+  const std::vector<uint32_t>& members;
+  bool all_points = true;  // true when members holds every point in order
+  int stream = -1;         // for a source: the stream id it emits into
+  int threads = 0;
+  uint64_t seed = 0;       // graph seed mixed with the node's index
+  std::string node_name;
+  std::string base_dir;  // folder of the graph file, for relative paths
+  CookStats* stats = nullptr;
+};
+
+class Node {
+ public:
+  virtual ~Node() = default;
+  // Called once per substep, in chain order.
+  virtual void cook(CookContext& ctx) = 0;
+};
+
+enum class NodeRole {
+  Pop,       // acts on particles in a chain
+  Source,    // a stream generator: emits particles, nodes below act on its stream only
+  Merge,     // combines chains
+  Solver,    // ends a chain: one particle object, runs substeps
+  Collider,  // a shape referenced by solvers
+};
+
+struct NodeTypeInfo {
+  std::string type;
+  std::string doc;
+  NodeRole role = NodeRole::Pop;
+  std::vector<ParamDecl> params;
+  std::function<std::unique_ptr<Node>()> make;
+  // Colliders only: the shape and pose for evaluated parameters.
+  std::function<void(const ParamSet&, ColliderState&)> collider;
+  // Extra load-time checks on authored parameters (file exists, ...); returns an error message
+  // and the offending parameter name, or an empty message.
+  std::function<std::pair<std::string, std::string>(const ParamSet&, const std::string& base_dir)>
+      check;
+
+  const ParamDecl* find_param(const std::string& name) const;
+};
+
+// The registry of node types (filled by register_builtin_nodes in nodes/).
+void register_node_type(NodeTypeInfo info);
+const NodeTypeInfo* find_node_type(const std::string& type);
+std::vector<const NodeTypeInfo*> node_types();  // sorted by type name
+
+}  // namespace grains

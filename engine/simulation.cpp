@@ -1,0 +1,270 @@
+#include "engine/simulation.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <set>
+
+#include "engine/geometry_io.h"
+#include "engine/neighbors.h"
+
+namespace grains {
+
+Simulation::~Simulation() = default;
+
+Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads_(threads) {
+  if (threads_ > 0) omp_set_num_threads(threads_);
+  objects_per_node_.assign(graph_.nodes.size(), 0);
+  for (size_t s = 0; s < graph_.solvers.size(); ++s) {
+    auto obj = std::make_unique<SimObject>();
+    int solver = graph_.solvers[s];
+    obj->name = graph_.nodes[solver].name;
+    obj->objid = static_cast<int>(s);
+    obj->solver = solver;
+
+    // chain: post-order from the solver, inputs left to right, each node once
+    std::vector<char> seen(graph_.nodes.size(), 0);
+    std::vector<std::vector<int>> streams(graph_.nodes.size());
+    std::function<void(int)> visit = [&](int k) {
+      if (seen[k]) return;
+      seen[k] = 1;
+      std::set<int> st;
+      for (int in : graph_.nodes[k].inputs) {
+        visit(in);
+        st.insert(streams[in].begin(), streams[in].end());
+      }
+      const NodeDesc& d = graph_.nodes[k];
+      if (d.info->role == NodeRole::Source) st = {k};  // a generator starts its own stream
+      streams[k].assign(st.begin(), st.end());
+      ChainNode c;
+      c.node = k;
+      c.streams = streams[k];
+      c.impl = d.info->make ? d.info->make() : nullptr;
+      c.params = ParamSet(d.info->params, d.params);
+      obj->chain.push_back(std::move(c));
+      objects_per_node_[k]++;
+    };
+    visit(solver);
+
+    const ParamValue* cl = nullptr;
+    auto it = graph_.nodes[solver].params.find("colliders");
+    if (it != graph_.nodes[solver].params.end()) cl = &it->second;
+    if (cl)
+      for (const auto& name : cl->list) {
+        int ci = graph_.find(name);
+        obj->collider_nodes.push_back(ci);
+        obj->collider_params.emplace_back(graph_.nodes[ci].info->params, graph_.nodes[ci].params);
+        objects_per_node_[ci]++;
+      }
+    obj->colliders.resize(obj->collider_nodes.size());
+    objects_.push_back(std::move(obj));
+  }
+}
+
+ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
+  ExprVars v;
+  v.ST = st;
+  v.TIMESTEP = 1.0 / graph_.fps;
+  v.SFPS = graph_.fps;
+  v.SF = st * graph_.fps;
+  v.T = st;
+  v.F = v.SF + 1;
+  v.OBJID = obj.objid;
+  v.SNOBJ = static_cast<double>(objects_.size());
+  v.NOBJ = node >= 0 ? objects_per_node_[node] : 1;
+  // OBJ: this object's position among the objects the node processes, in solver order
+  int index = 0;
+  if (node >= 0)
+    for (const auto& o : objects_) {
+      if (o.get() == &obj) break;
+      bool uses = false;
+      for (const auto& c : o->chain) uses = uses || c.node == node;
+      for (int c : o->collider_nodes) uses = uses || c == node;
+      index += uses ? 1 : 0;
+    }
+  v.OBJ = index;
+  v.OBJNAME = obj.name;
+  v.DOPNET = graph_.name;
+  return v;
+}
+
+void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
+  for (size_t k = 0; k < obj.collider_nodes.size(); ++k) {
+    int node = obj.collider_nodes[k];
+    const NodeTypeInfo* info = graph_.nodes[node].info;
+    ParamSet& ps = obj.collider_params[k];
+    ColliderState& c = obj.colliders[k];
+    if (!obj.colliders_posed) {  // the pose at the start of the simulation
+      ps.evaluate(vars_for(obj, node, t_end - dt));
+      info->collider(ps, c);
+    }
+    Pose before = c.pose;
+    ps.evaluate(vars_for(obj, node, t_end));
+    info->collider(ps, c);
+    c.name = graph_.nodes[node].name;
+    c.prev_pose = before;
+    c.dt = static_cast<float>(dt);
+  }
+  obj.colliders_posed = true;
+}
+
+void Simulation::step_object(SimObject& obj) {
+  const NodeDesc& solver = graph_.nodes[obj.solver];
+  ChainNode& solver_entry = obj.chain.back();
+  solver_entry.params.evaluate(vars_for(obj, obj.solver, frame_ / graph_.fps));
+  int substeps = std::max(1, solver_entry.params.i("substeps"));
+  (void)solver;
+
+  TimeInfo time;
+  time.fps = graph_.fps;
+  time.substeps = substeps;
+  time.frame = frame_ + 1;
+  time.dt = 1.0 / (graph_.fps * substeps);
+  CookStats stats;
+  std::vector<uint32_t> members;
+
+  for (int s = 0; s < substeps; ++s) {
+    time.substep = s;
+    time.st = frame_ / graph_.fps + s * time.dt;
+    ParticleStore& pts = obj.pts;
+    std::fill(pts.v3("force"), pts.v3("force") + 3 * pts.size(), 0.0f);
+    std::fill(pts.i("ispbd"), pts.i("ispbd") + pts.size(), 0);
+    pose_colliders(obj, time.st + time.dt, time.dt);
+
+    for (auto& c : obj.chain) {
+      const NodeDesc& d = graph_.nodes[c.node];
+      if (&c != &solver_entry) c.params.evaluate(vars_for(obj, c.node, time.st));
+      if (!c.impl) continue;
+      // members: the points of this node's streams (every point when it has none)
+      members.clear();
+      bool all = c.streams.empty();
+      if (all) {
+        members.resize(pts.size());
+        for (size_t k = 0; k < pts.size(); ++k) members[k] = static_cast<uint32_t>(k);
+      } else {
+        const int32_t* sid = pts.i("streamid");
+        for (size_t k = 0; k < pts.size(); ++k)
+          if (std::binary_search(c.streams.begin(), c.streams.end(), sid[k]))
+            members.push_back(static_cast<uint32_t>(k));
+        all = members.size() == pts.size();
+      }
+      CookContext ctx{pts,
+                      c.params,
+                      time,
+                      obj.colliders,
+                      members,
+                      all,
+                      d.info->role == NodeRole::Source ? c.node : -1,
+                      threads_,
+                      graph_.seed * 1000003ULL + static_cast<uint64_t>(c.node),
+                      d.name,
+                      graph_.base_dir,
+                      &stats};
+      c.impl->cook(ctx);
+    }
+  }
+  obj.stats = FrameStats{};
+  obj.stats.max_penetration = stats.max_penetration;
+  obj.stats.mean_penetration = stats.mean_penetration;
+}
+
+void Simulation::step_frame() {
+  for (auto& o : objects_) {
+    auto t0 = std::chrono::steady_clock::now();
+    step_object(*o);
+    auto t1 = std::chrono::steady_clock::now();
+    o->stats.frame = frame_ + 1;
+    o->stats.time = (frame_ + 1) / graph_.fps;
+    measure_frame(o->pts, o->stats);
+    o->stats.wall_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  }
+  ++frame_;
+}
+
+void measure_frame(const ParticleStore& pts, FrameStats& st) {
+  size_t n = pts.size();
+  st.points = n;
+  st.constraints = pts.prim_count();
+  const float* v = pts.v3_if("v");
+  const float* m = pts.f_if("mass");
+  double ke = 0;
+  for (size_t k = 0; k < n; ++k) {
+    Vec3 vk = load3(v, k);
+    ke += 0.5 * (m ? m[k] : 1.0) * dot(vk, vk);
+  }
+  st.kinetic_energy = ke;
+  st.max_strain = 0;
+  if (const float* strain = pts.prim_f_if("strain"))
+    for (size_t p = 0; p < pts.prim_count(); ++p)
+      st.max_strain = std::max(st.max_strain, std::fabs(strain[p]));
+  // penetration over touching pairs
+  const float* P = pts.v3_if("P");
+  const float* r = pts.f_if("pscale");
+  if (n < 2 || !P || !r) {
+    st.max_penetration = st.mean_penetration = 0;
+    return;
+  }
+  NeighborSearch search;
+  NeighborList nl;
+  NeighborQuery q;
+  q.query_scale = 1.0f;
+  q.max_neighbors = 0;
+  bool uniform = true;
+  for (size_t k = 1; k < n && uniform; ++k) uniform = r[k] == r[0];
+  q.uniform_radius = uniform;
+  search.find(P, r, n, q, nl);
+  double sum = 0;
+  size_t count = 0;
+  float mx = 0;
+  for (size_t i = 0; i < n; ++i)
+    for (uint32_t e = nl.offsets[i]; e < nl.offsets[i + 1]; ++e) {
+      uint32_t j = nl.indices[e];
+      if (j <= i) continue;
+      float rr = r[i] + r[j];
+      float d = length(load3(P, i) - load3(P, j));
+      float pen = (rr - d) / rr;
+      if (pen <= 0) continue;
+      mx = std::max(mx, pen);
+      sum += pen;
+      ++count;
+    }
+  st.max_penetration = mx;
+  st.mean_penetration = count ? static_cast<float>(sum / count) : 0.0f;
+}
+
+FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
+    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all) {
+  std::filesystem::create_directories(dir_);
+  std::string path = dir_ + "/stats.csv";
+  FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw GeometryError(path + ": cannot write");
+  std::fputs(
+      "frame,time,points,constraints,wall_ms,max_penetration,mean_penetration,max_strain,"
+      "kinetic_energy\n",
+      f);
+  std::fclose(f);
+}
+
+void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s, bool ply) {
+  if (ply) {
+    char name[64];
+    std::snprintf(name, sizeof name, "/frame_%04d.ply", frame);
+    if (all_)
+      write_ply_all(dir_ + name, pts);
+    else
+      write_ply(dir_ + name, pts, attributes_);
+  }
+  std::string path = dir_ + "/stats.csv";
+  FILE* f = std::fopen(path.c_str(), "a");
+  if (!f) throw GeometryError(path + ": cannot write");
+  std::fprintf(f, "%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g\n", s.frame, s.time, s.points,
+               s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration, s.max_strain,
+               s.kinetic_energy);
+  std::fclose(f);
+}
+
+}  // namespace grains

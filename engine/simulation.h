@@ -1,0 +1,97 @@
+// The evaluator (DESIGN §3): runs each solver's POP chain top-down every substep.
+//
+// For each frame, each solver (one particle object) runs `substeps` substeps of
+// dt = 1 / (fps * substeps). In a substep: `force` is cleared and `ispbd` reset to 0; the
+// colliders the solver names are posed at the end of the substep (their pose at its start is
+// kept, which gives their surface velocity); the chain runs in order — a node's inputs before
+// it, left to right — each node acting on the points of its chain's streams; then the solver
+// moves the points whose `ispbd` is still 0.
+#pragma once
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/graph.h"
+#include "engine/node.h"
+
+namespace grains {
+
+struct FrameStats {
+  int frame = 0;
+  double time = 0;
+  size_t points = 0;
+  size_t constraints = 0;
+  double wall_ms = 0;
+  float max_penetration = 0;   // max over overlapping pairs of overlap / (r_i + r_j)
+  float mean_penetration = 0;  // mean over overlapping pairs
+  float max_strain = 0;        // max |strain| over constraints
+  double kinetic_energy = 0;   // sum of m v^2 / 2 (J)
+};
+
+// One chain entry: a node instance with its parameters, evaluated per substep.
+struct ChainNode {
+  int node = -1;                // index into Graph::nodes
+  std::vector<int> streams;     // stream ids this node acts on; empty = every point
+  std::unique_ptr<Node> impl;
+  ParamSet params;
+};
+
+struct SimObject {
+  std::string name;  // the solver node's name (OBJNAME)
+  int objid = 0;
+  int solver = -1;   // index of the solver node
+  ParticleStore pts;
+  std::vector<ChainNode> chain;  // cook order, solver last
+  std::vector<int> collider_nodes;
+  std::vector<ParamSet> collider_params;
+  std::vector<ColliderState> colliders;
+  bool colliders_posed = false;
+  FrameStats stats;
+};
+
+class Simulation {
+ public:
+  // threads <= 0: OpenMP's default.
+  Simulation(const Graph& graph, int threads = 0);
+  ~Simulation();
+
+  // Replaces an object's points before the first frame (cook_node's starting state).
+  void set_points(size_t object, ParticleStore pts) { objects_[object]->pts = std::move(pts); }
+  // Advances every object by one frame.
+  void step_frame();
+  int frame() const { return frame_; }  // frames completed
+  const Graph& graph() const { return graph_; }
+  size_t object_count() const { return objects_.size(); }
+  SimObject& object(size_t k) { return *objects_[k]; }
+  const SimObject& object(size_t k) const { return *objects_[k]; }
+
+ private:
+  void step_object(SimObject& obj);
+  ExprVars vars_for(const SimObject& obj, int node, double st) const;
+  void pose_colliders(SimObject& obj, double t_end, double dt);
+
+  Graph graph_;
+  int threads_ = 0;
+  int frame_ = 0;
+  std::vector<std::unique_ptr<SimObject>> objects_;
+  std::vector<int> objects_per_node_;  // NOBJ for each node
+};
+
+// Computes the per-frame diagnostics of an object's points (penetration, energy, strain).
+void measure_frame(const ParticleStore& pts, FrameStats& stats);
+
+// Writes frames and stats.csv (DESIGN §6) into one folder.
+class FrameWriter {
+ public:
+  FrameWriter(std::string dir, std::vector<std::string> attributes, bool all_attributes = false);
+  void write(int frame, const ParticleStore& pts, const FrameStats& stats, bool write_ply);
+  const std::string& dir() const { return dir_; }
+
+ private:
+  std::string dir_;
+  std::vector<std::string> attributes_;
+  bool all_ = false;
+};
+
+}  // namespace grains

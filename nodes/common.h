@@ -1,0 +1,28 @@
+// Small helpers shared by node implementations.
+#pragma once
+#include <cstdint>
+#include <string>
+
+#include "engine/vec3.h"
+
+namespace grains {
+
+// Deterministic random numbers: a 64-bit mix of (seed, counter), uniform in [0, 1).
+inline uint64_t mix64(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+inline float rand01(uint64_t seed, uint64_t counter) {
+  return static_cast<float>(mix64(seed ^ mix64(counter)) >> 40) / static_cast<float>(1ULL << 24);
+}
+
+// Resolves a path relative to the graph's folder.
+std::string resolve_path(const std::string& base_dir, const std::string& path);
+
+// Region test shared by group and kill: "box" (center, full size) or "sphere" (center, radius).
+bool inside_region(const std::string& shape, const Vec3& center, const Vec3& size, float radius,
+                   const Vec3& p);
+
+}  // namespace grains

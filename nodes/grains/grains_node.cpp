@@ -1,0 +1,180 @@
+// grains: the POP Grains node. Gathers the points of its stream (and group) into compact arrays,
+// runs one PBD substep (solver.h) and scatters P and v back, marking the points ispbd = 1 so the
+// solver leaves them alone. Parameter names are the help page's labels in snake_case.
+#include <cmath>
+
+#include "engine/node.h"
+#include "nodes/grains/solver.h"
+#include "nodes/register.h"
+
+namespace grains {
+namespace {
+
+class GrainsNode : public Node {
+ public:
+  void cook(CookContext& ctx) override {
+    const ParamSet& p = ctx.params;
+    if (p.f("activation") <= 0) return;
+    ParticleStore& s = ctx.pts;
+    const std::string& group = p.s("group");
+    const int32_t* g = group.empty() ? nullptr : s.i_if(group_attribute(group));
+    if (!group.empty() && !g) return;  // the group does not exist yet: no member
+    idx_.clear();
+    for (uint32_t k : ctx.members)
+      if (!g || g[k]) idx_.push_back(k);
+    size_t n = idx_.size();
+    if (n == 0) return;
+
+    GrainsSettings st = settings(p, ctx);
+    float half_sep = st.particle_separation * 0.5f;
+    gather3(s.v3("P"), P_);
+    gather3(s.v3("v"), v_);
+    gather3(s.v3("force"), F_);
+    gather1(s.f("mass"), mass_);
+    gather1(s.f("pscale"), r_);
+    for (float& r : r_)
+      if (!(r > 0)) r = half_sep;  // no pscale: the separation hint gives the radius
+    GrainsData d;
+    d.n = n;
+    d.P = P_.data();
+    d.v = v_.data();
+    d.force = F_.data();
+    d.mass = mass_.data();
+    d.pscale = r_.data();
+    d.friction = optional(s, "friction", friction_);
+    d.repulsionweight = optional(s, "repulsionweight", rw_);
+    d.repulsionstiffness = optional(s, "repulsionstiffness", rs_);
+    d.attractionweight = optional(s, "attractionweight", aw_);
+    d.attractionstiffness = optional(s, "attractionstiffness", as_);
+    if (st.mass_shock == MassShock::Global) {
+      shock_.assign(n, 1.0f);
+      d.shockmass = shock_.data();
+    }
+    GrainsStats stats;
+    solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), &stats);
+
+    float* P = s.v3("P");
+    float* v = s.v3("v");
+    int32_t* pbd = s.i("ispbd");
+    for (size_t k = 0; k < n; ++k) {
+      uint32_t i = idx_[k];
+      store3(P, i, load3(P_.data(), k));
+      store3(v, i, load3(v_.data(), k));
+      pbd[i] = 1;
+    }
+    if (d.shockmass) {
+      float* sm = s.f("shockmass");
+      for (size_t k = 0; k < n; ++k) sm[idx_[k]] = shock_[k];
+    }
+  }
+
+ private:
+  GrainsSettings settings(const ParamSet& p, const CookContext& ctx) const {
+    GrainsSettings st;
+    st.dt = static_cast<float>(ctx.time.dt);
+    st.substeps = ctx.time.substeps;
+    st.threads = ctx.threads;
+    st.constraint_iterations = p.i("constraint_iterations");
+    st.particle_separation = static_cast<float>(p.f("particle_separation"));
+    st.assume_uniform_radius = p.b("assume_uniform_radius");
+    st.friction_with_colliders = static_cast<float>(p.f("friction_with_colliders"));
+    st.friction_with_particles = static_cast<float>(p.f("friction_with_particles"));
+    st.accurate_friction = p.b("accurate_friction");
+    st.static_threshold = static_cast<float>(p.f("static_threshold"));
+    st.scale_kinetic = static_cast<float>(p.f("scale_kinetic"));
+    st.repulsion_weight = static_cast<float>(p.f("internal_collisions_weight"));
+    st.repulsion_stiffness = static_cast<float>(p.f("internal_collisions_stiffness"));
+    st.mass_shock = !p.b("enable_mass_shock_scaling") ? MassShock::Off
+                    : p.s("mass_shock_method") == "global" ? MassShock::Global
+                                                           : MassShock::Local;
+    st.shock_scaling_power = static_cast<float>(p.f("shock_scaling_power"));
+    st.shock_axis = p.v3("shock_axis");
+    st.shock_origin = p.v3("shock_origin");
+    st.clumping_weight = static_cast<float>(p.f("clumping_weight"));
+    st.clumping_stiffness = static_cast<float>(p.f("clumping_stiffness"));
+    st.max_neighbors = p.i("max_neighbors");
+    st.neighbor_query_scale = static_cast<float>(p.f("neighbor_query_scale"));
+    st.max_speed = static_cast<float>(p.f("max_speed"));
+    st.max_acceleration = static_cast<float>(p.f("max_acceleration"));
+    st.drift_threshold = static_cast<float>(p.f("drift_threshold"));
+    st.velocity_blend = static_cast<float>(p.f("velocity_blend"));
+    st.over_relaxation = static_cast<float>(p.f("over_relaxation"));
+    st.update_collisions_during_iterations = p.b("update_collisions_during_iterations");
+    st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
+    st.final_collision_test = p.b("final_collision_test");
+    st.disable_constraint_averaging = p.b("disable_constraint_averaging");
+    return st;
+  }
+
+  void gather3(const float* a, std::vector<float>& out) const {
+    out.resize(3 * idx_.size());
+    for (size_t k = 0; k < idx_.size(); ++k) store3(out.data(), k, load3(a, idx_[k]));
+  }
+  void gather1(const float* a, std::vector<float>& out) const {
+    out.resize(idx_.size());
+    for (size_t k = 0; k < idx_.size(); ++k) out[k] = a[idx_[k]];
+  }
+  // A scaling attribute: nullptr when the points lack it (scale 1).
+  const float* optional(const ParticleStore& s, const char* name, std::vector<float>& out) const {
+    const float* a = s.f_if(name);
+    if (!a) return nullptr;
+    gather1(a, out);
+    return out.data();
+  }
+
+  GrainsSolver solver_;
+  std::vector<uint32_t> idx_;
+  std::vector<float> P_, v_, F_, mass_, r_, friction_, rw_, rs_, aw_, as_, shock_;
+};
+
+}  // namespace
+
+void register_grains_node() {
+  NodeTypeInfo t;
+  t.type = "grains";
+  t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping).";
+  t.params = {
+      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
+      ParamDecl::String("group", "", "act only on this point group of the stream (empty: the whole stream)"),
+      ParamDecl::Float("particle_separation", 0.1,
+                       "mean grain diameter hint: radius of points without pscale, mass-shock length scale").positive().unit("m"),
+      ParamDecl::Int("constraint_iterations", 10, "Jacobi iterations per substep; about twice the stacking height").at_least(1),
+      ParamDecl::Toggle("assume_uniform_radius", true, "all grains share one radius: faster neighbour search"),
+      ParamDecl::Float("friction_with_colliders", 1, "grain-collider friction; 0 slides, 1 matches the collider's velocity")
+          .at_least(0).scaled_by("friction"),
+      ParamDecl::Float("friction_with_particles", 1, "grain-grain friction; 0 slides, 1 sticks")
+          .at_least(0).scaled_by("friction"),
+      ParamDecl::Toggle("accurate_friction", false, "apply friction every iteration instead of once after the loop"),
+      ParamDecl::Float("static_threshold", 1, "slip below this times the overlap is removed entirely (static friction)").at_least(0),
+      ParamDecl::Float("scale_kinetic", 0.5, "beyond it, remove min(1, scale_kinetic * overlap / slip) of the slip").at_least(0),
+      ParamDecl::Float("internal_collisions_weight", 1, "weight of grain-grain collisions; 0 disables them")
+          .range(0, 2).scaled_by("repulsionweight"),
+      ParamDecl::Float("internal_collisions_stiffness", 1000, "stiffness of grain-grain collisions; full at substeps x iterations")
+          .at_least(0).scaled_by("repulsionstiffness"),
+      ParamDecl::Toggle("enable_mass_shock_scaling", false, "make higher grains lighter so stacks converge faster"),
+      ParamDecl::Menu("mass_shock_method", {"global", "local"}, "global",
+                      "global: write shockmass before iterating; local: pair mass ratio on the fly (power clamped near 7)"),
+      ParamDecl::Float("shock_scaling_power", 1, "0: no ratio; 1: a 15% ratio between two stacked grains").at_least(0),
+      ParamDecl::Vector("shock_axis", {0, 1, 0}, "up vector of the mass gradient (against gravity)"),
+      ParamDecl::Vector("shock_origin", {0, 0, 0}, "rough centre of the grains; far grains clamp to min/max mass").unit("m"),
+      ParamDecl::Float("clumping_weight", 0, "weight of the pull between nearby grains; 0 disables clumping")
+          .range(0, 2).scaled_by("attractionweight"),
+      ParamDecl::Float("clumping_stiffness", 100, "stiffness of clumping").at_least(0).scaled_by("attractionstiffness"),
+      ParamDecl::Int("max_neighbors", 32, "most neighbour candidates kept per grain (nearest first)").at_least(1),
+      ParamDecl::Float("neighbor_query_scale", 1.5, "candidates closer than this times the summed radii; also the clumping range")
+          .at_least(1),
+      ParamDecl::Float("max_speed", 1e6, "cap on the reported speed (positions are not limited)").positive().unit("m/s"),
+      ParamDecl::Float("max_acceleration", 1e6, "cap on the velocity change constraints cause").positive().unit("m/s^2"),
+      ParamDecl::Float("drift_threshold", 0, "grains slower than this stay where they were").at_least(0).unit("m/s"),
+      ParamDecl::Float("velocity_blend", 0, "blend of the new velocity with the predicted one").range(0, 1),
+      ParamDecl::Float("over_relaxation", 1, "scale of the averaged corrections; above 1 converges faster").range(0, 2),
+      ParamDecl::Toggle("update_collisions_during_iterations", false, "re-find collider planes every iteration"),
+      ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),
+      ParamDecl::Toggle("final_collision_test", true, "a swept collision pass after the loop: no leaks through thin or moving colliders"),
+      ParamDecl::Toggle("disable_constraint_averaging", false, "sum corrections instead of averaging them (momentum-preserving)"),
+  };
+  t.make = [] { return std::make_unique<GrainsNode>(); };
+  register_node_type(std::move(t));
+}
+
+}  // namespace grains

@@ -1,0 +1,95 @@
+// group: puts points of the node's stream into a named point group by region (box, sphere) or
+// by comparing an attribute with a value.
+#include <cmath>
+
+#include "engine/node.h"
+#include "nodes/common.h"
+#include "nodes/register.h"
+
+namespace grains {
+namespace {
+
+bool compare(const std::string& op, double a, double b) {
+  if (op == "<") return a < b;
+  if (op == "<=") return a <= b;
+  if (op == ">") return a > b;
+  if (op == ">=") return a >= b;
+  if (op == "==") return a == b;
+  return a != b;
+}
+
+class GroupNode : public Node {
+ public:
+  void cook(CookContext& ctx) override {
+    const ParamSet& p = ctx.params;
+    if (p.f("activation") <= 0) return;
+    ParticleStore& s = ctx.pts;
+    const std::string& name = p.s("group_name");
+    const std::string& rule = p.s("rule");
+    const std::string& op = p.s("operation");
+    int32_t* g = s.i(group_attribute(name));
+    const float* P = s.v3("P");
+    const Attribute* attr = nullptr;
+    int comp = 0;
+    if (rule == "attribute") {
+      std::string an = p.s("attribute");
+      auto us = an.rfind('_');
+      attr = s.find(an);
+      if (!attr && us != std::string::npos && an.size() == us + 2) {  // NAME_x, NAME_y, NAME_z
+        attr = s.find(an.substr(0, us));
+        comp = an.back() - 'x';
+        if (attr && (attr->type != AttribType::Vec3 || comp < 0 || comp > 2)) attr = nullptr;
+      }
+      if (!attr) return;  // no point has the attribute yet: nothing matches
+    }
+    Vec3 c = p.v3("center"), size = p.v3("size");
+    float radius = static_cast<float>(p.f("radius"));
+    double value = p.f("value");
+    for (uint32_t k : ctx.members) {
+      bool hit;
+      if (rule == "attribute") {
+        double a = attr->type == AttribType::Int ? attr->i[k]
+                   : attr->type == AttribType::Float ? attr->f[k]
+                                                     : attr->f[3 * k + comp];
+        hit = compare(p.s("compare"), a, value);
+      } else {
+        hit = inside_region(rule, c, size, radius, load3(P, k));
+      }
+      if (op == "replace") g[k] = hit ? 1 : 0;
+      else if (op == "add") g[k] = (g[k] || hit) ? 1 : 0;
+      else if (op == "intersect") g[k] = (g[k] && hit) ? 1 : 0;
+      else g[k] = (g[k] && !hit) ? 1 : 0;  // subtract
+    }
+  }
+};
+
+}  // namespace
+
+void register_group_node() {
+  NodeTypeInfo t;
+  t.type = "group";
+  t.doc = "Puts points into a named group by region or attribute comparison, every substep.";
+  t.params = {
+      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
+      ParamDecl::String("group_name", "group1", "name of the point group"),
+      ParamDecl::Menu("rule", {"box", "sphere", "attribute"}, "box", "membership test"),
+      ParamDecl::Vector("center", {0, 0, 0}, "centre of the box or sphere").unit("m"),
+      ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box").unit("m"),
+      ParamDecl::Float("radius", 0.5, "radius of the sphere").positive().unit("m"),
+      ParamDecl::String("attribute", "", "attribute compared (vector components as NAME_x)"),
+      ParamDecl::Menu("compare", {"<", "<=", ">", ">=", "==", "!="}, ">", "comparison with `value`"),
+      ParamDecl::Float("value", 0, "value the attribute is compared with"),
+      ParamDecl::Menu("operation", {"replace", "add", "intersect", "subtract"}, "replace",
+                      "how the test combines with existing membership"),
+  };
+  t.make = [] { return std::make_unique<GroupNode>(); };
+  t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
+    if (p.s("group_name").empty()) return {"group_name must not be empty", "group_name"};
+    if (p.s("rule") == "attribute" && p.s("attribute").empty())
+      return {"rule \"attribute\" needs an `attribute`", "attribute"};
+    return {"", ""};
+  };
+  register_node_type(std::move(t));
+}
+
+}  // namespace grains

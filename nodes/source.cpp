@@ -1,0 +1,189 @@
+// source: a stream generator. Fills a box, sphere or grid at `separation` (grid or hexagonal
+// packing, optional jitter), or reads points from a PLY/OBJ file; emits once at a frame or at a
+// rate over a frame range, with an initial velocity. pscale defaults to separation/2 and mass
+// comes from density when one is given.
+#include <cmath>
+#include <filesystem>
+
+#include "engine/geometry_io.h"
+#include "engine/node.h"
+#include "nodes/common.h"
+#include "nodes/register.h"
+
+namespace grains {
+namespace {
+
+class SourceNode : public Node {
+ public:
+  void cook(CookContext& ctx) override {
+    const ParamSet& p = ctx.params;
+    if (p.f("activation") <= 0) return;
+    const std::string& mode = p.s("emission");
+    if (mode == "once") {
+      if (emitted_ || ctx.time.frame != p.i("birth_frame") || ctx.time.substep != 0) return;
+      emitted_ = true;
+      std::vector<Vec3> pts = fill(ctx);
+      emit(ctx, pts);
+    } else {  // rate
+      int f = ctx.time.frame;
+      if (f < p.i("start_frame") || f > p.i("end_frame")) return;
+      carry_ += p.f("rate") * ctx.time.dt;
+      int count = static_cast<int>(std::floor(carry_));
+      carry_ -= count;
+      std::vector<Vec3> pts;
+      for (int k = 0; k < count; ++k) pts.push_back(random_point(ctx));
+      emit(ctx, pts);
+    }
+  }
+
+ private:
+  // Points filling the shape at the separation; grid or hexagonal close packing.
+  std::vector<Vec3> fill(CookContext& ctx) {
+    const ParamSet& p = ctx.params;
+    const std::string& shape = p.s("shape");
+    Vec3 c = p.v3("center");
+    std::vector<Vec3> out;
+    if (shape == "file") {
+      ParticleStore file = read_ply_or_obj(ctx);
+      const float* P = file.v3_if("P");
+      for (size_t k = 0; k < file.size(); ++k) out.push_back(load3(P, k) + c);
+      return out;
+    }
+    float s = static_cast<float>(p.f("separation"));
+    Vec3 size = p.v3("size");
+    float radius = static_cast<float>(p.f("radius"));
+    bool hex = p.s("packing") == "hexagonal";
+    if (shape == "sphere") size = Vec3{2 * radius, 2 * radius, 2 * radius};
+    if (shape == "grid") size.y = 0;  // a single layer in the xz plane
+    // hexagonal close packing: rows offset by s/2, layers by s*sqrt(3)/2 and sqrt(2/3)*s
+    float dx = s, dz = hex ? s * std::sqrt(3.0f) / 2 : s, dy = hex ? s * std::sqrt(2.0f / 3.0f) : s;
+    int nx = std::max(1, static_cast<int>(std::floor(size.x / dx + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    int ny = shape == "grid" ? 1 : std::max(1, static_cast<int>(std::floor(size.y / dy + 1e-4f)));
+    int nz = std::max(1, static_cast<int>(std::floor(size.z / dz + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    Vec3 lo = c - Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
+    float jitter = static_cast<float>(p.f("jitter")) * s;
+    uint64_t counter = 0;
+    for (int j = 0; j < ny; ++j)
+      for (int k = 0; k < nz; ++k)
+        for (int i = 0; i < nx; ++i) {
+          Vec3 q = lo + Vec3{i * dx, j * dy, k * dz};
+          if (hex) {
+            q.x += (k % 2) * s * 0.5f + (j % 2) * s * 0.5f;
+            q.z += (j % 2) * s * std::sqrt(3.0f) / 6;
+          }
+          if (jitter > 0) {
+            q += Vec3{rand01(ctx.seed, counter) - 0.5f, rand01(ctx.seed, counter + 1) - 0.5f,
+                      rand01(ctx.seed, counter + 2) - 0.5f} * jitter;
+          }
+          counter += 3;
+          if (shape == "sphere" && length(q - c) > radius) continue;
+          out.push_back(q);
+        }
+    return out;
+  }
+
+  Vec3 random_point(CookContext& ctx) {
+    const ParamSet& p = ctx.params;
+    Vec3 c = p.v3("center");
+    uint64_t k = 3 * counter_++;
+    Vec3 u{rand01(ctx.seed, k), rand01(ctx.seed, k + 1), rand01(ctx.seed, k + 2)};
+    if (p.s("shape") == "sphere") {  // uniform in the ball by rejection-free radius scaling
+      float r = static_cast<float>(p.f("radius")) * std::cbrt(u.x);
+      float z = 2 * u.y - 1, phi = 2 * static_cast<float>(M_PI) * u.z;
+      float q = std::sqrt(std::max(0.0f, 1 - z * z));
+      return c + Vec3{q * std::cos(phi), z, q * std::sin(phi)} * r;
+    }
+    Vec3 size = p.v3("size");
+    if (p.s("shape") == "grid") size.y = 0;
+    return c + Vec3{(u.x - 0.5f) * size.x, (u.y - 0.5f) * size.y, (u.z - 0.5f) * size.z};
+  }
+
+  ParticleStore read_ply_or_obj(CookContext& ctx) {
+    std::string path = resolve_path(ctx.base_dir, ctx.params.s("file"));
+    if (std::filesystem::path(path).extension() == ".ply") return read_ply(path);
+    Mesh m = read_mesh(path);
+    ParticleStore s;
+    s.add_points(m.vertices.size());
+    float* P = s.v3("P");
+    for (size_t k = 0; k < m.vertices.size(); ++k) store3(P, k, m.vertices[k]);
+    return s;
+  }
+
+  void emit(CookContext& ctx, const std::vector<Vec3>& pts) {
+    if (pts.empty()) return;
+    const ParamSet& p = ctx.params;
+    ParticleStore& s = ctx.pts;
+    size_t first = s.add_points(pts.size());
+    float sep = static_cast<float>(p.f("separation"));
+    float r = p.f("pscale") > 0 ? static_cast<float>(p.f("pscale")) : sep * 0.5f;
+    float density = static_cast<float>(p.f("density"));
+    float mass = density > 0 ? density * 4.0f / 3.0f * static_cast<float>(M_PI) * r * r * r
+                             : static_cast<float>(p.f("mass"));
+    Vec3 vel = p.v3("velocity");
+    const std::string& group = p.s("group");
+    float* P = s.v3("P");
+    float* v = s.v3("v");
+    float* rest = s.v3("rest");
+    float* ps = s.f("pscale");
+    float* m = s.f("mass");
+    int32_t* sid = s.i("streamid");
+    for (size_t k = 0; k < pts.size(); ++k) {
+      size_t i = first + k;
+      store3(P, i, pts[k]);
+      store3(rest, i, pts[k]);
+      store3(v, i, vel);
+      ps[i] = r;
+      m[i] = mass;
+      sid[i] = ctx.stream;
+      if (!group.empty()) s.set_group(group, i, true);
+    }
+  }
+
+  bool emitted_ = false;
+  double carry_ = 0;
+  uint64_t counter_ = 0;
+};
+
+}  // namespace
+
+void register_source_node() {
+  NodeTypeInfo t;
+  t.type = "source";
+  t.doc = "Emits grains: fills a shape at a separation or reads points from a file (a stream generator).";
+  t.role = NodeRole::Source;
+  t.params = {
+      ParamDecl::Float("activation", 1, "the node emits only while this is greater than 0"),
+      ParamDecl::Menu("shape", {"box", "sphere", "grid", "file"}, "box",
+                      "what to fill: a box, a sphere, a one-layer grid in the xz plane, or the points of `file`"),
+      ParamDecl::Vector("center", {0, 0, 0}, "centre of the shape; offset added to file points").unit("m"),
+      ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box or grid").unit("m"),
+      ParamDecl::Float("radius", 0.5, "radius of the sphere").positive().unit("m"),
+      ParamDecl::String("file", "", "PLY or OBJ file of points (shape \"file\"), relative to the graph"),
+      ParamDecl::Float("separation", 0.1, "distance between neighbouring grains").positive().unit("m"),
+      ParamDecl::Menu("packing", {"grid", "hexagonal"}, "grid", "cubic grid or hexagonal close packing"),
+      ParamDecl::Float("jitter", 0, "random offset of each grain, as a fraction of the separation").range(0, 1),
+      ParamDecl::Menu("emission", {"once", "rate"}, "once",
+                      "emit the whole fill once at `birth_frame`, or random points at `rate`"),
+      ParamDecl::Int("birth_frame", 1, "frame of the one-time emission").at_least(1),
+      ParamDecl::Float("rate", 100, "grains per second while emitting at a rate").at_least(0).unit("1/s"),
+      ParamDecl::Int("start_frame", 1, "first frame of rate emission").at_least(1),
+      ParamDecl::Int("end_frame", 1000000, "last frame of rate emission").at_least(1),
+      ParamDecl::Vector("velocity", {0, 0, 0}, "initial velocity").unit("m/s"),
+      ParamDecl::Float("pscale", 0, "grain radius; 0 means separation/2").at_least(0).unit("m"),
+      ParamDecl::Float("density", 0, "mass = density * 4/3 pi pscale^3 when greater than 0").at_least(0).unit("kg/m^3"),
+      ParamDecl::Float("mass", 1, "mass of each grain when density is 0").positive().unit("kg"),
+      ParamDecl::String("group", "", "also put the new grains in this group"),
+  };
+  t.make = [] { return std::make_unique<SourceNode>(); };
+  t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
+    if (p.s("shape") == "file") {
+      if (p.s("file").empty()) return {"shape \"file\" needs a `file`", "file"};
+      std::string path = resolve_path(base, p.s("file"));
+      if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
+    }
+    return {"", ""};
+  };
+  register_node_type(std::move(t));
+}
+
+}  // namespace grains

@@ -1,0 +1,48 @@
+#include "tests/support/support.h"
+
+#include <sys/wait.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
+
+namespace grains::test {
+
+std::string temp_dir(const std::string& tag) {
+  static std::atomic<int> counter{0};
+  auto p = std::filesystem::temp_directory_path() /
+           ("grains_test_" + tag + "_" + std::to_string(getpid()) + "_" + std::to_string(counter++));
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p.string();
+}
+
+Graph graph_from(const std::string& text, const std::string& file) {
+  register_builtin_nodes();
+  return parse_graph(text, file);
+}
+
+std::string write_file(const std::string& dir, const std::string& name, const std::string& text) {
+  std::string path = dir + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+int run_grains(const std::string& args, const std::string& log) {
+  std::string cmd = std::string(GRAINS_BINARY) + " " + args + " > " + log + " 2>&1";
+  int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string source_dir() { return GRAINS_SOURCE_DIR; }
+
+}  // namespace grains::test

@@ -1,0 +1,23 @@
+// Shared helpers for tests: graphs from inline JSON, temporary folders, the grains binary.
+#pragma once
+#include <filesystem>
+#include <string>
+
+#include "engine/graph.h"
+#include "engine/simulation.h"
+#include "nodes/register.h"
+
+namespace grains::test {
+
+// A fresh empty folder under the system temp folder.
+std::string temp_dir(const std::string& tag);
+// Parses a graph from text; registers the built-in nodes first.
+Graph graph_from(const std::string& json_text, const std::string& file = "test.json");
+// Writes text to a file and returns its path.
+std::string write_file(const std::string& dir, const std::string& name, const std::string& text);
+// Runs the grains binary with arguments; returns its exit code; output goes to `log`.
+int run_grains(const std::string& args, const std::string& log);
+std::string read_text(const std::string& path);
+std::string source_dir();
+
+}  // namespace grains::test

@@ -1,0 +1,85 @@
+// The command line (DESIGN §5): exit codes, frames and stats.csv as DESIGN §6 says.
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <fstream>
+
+#include "engine/geometry_io.h"
+#include "tests/support/support.h"
+
+using namespace grains;
+using namespace grains::test;
+namespace fs = std::filesystem;
+
+namespace {
+const char* kGraph = R"({"grains_graph": 1, "name": "drop", "fps": 24, "frames": 4, "nodes": [
+  {"name": "src", "type": "source", "params": {"shape": "box", "size": [0.3, 0.3, 0.3], "separation": 0.1, "center": [0, 1, 0]}},
+  {"name": "g", "type": "force", "inputs": ["src"], "params": {"force": [0, -9.81, 0], "ignore_mass": true}},
+  {"name": "ground", "type": "collider", "params": {"shape": "plane"}},
+  {"name": "s", "type": "solver", "inputs": ["g"], "params": {"substeps": 2, "colliders": ["ground"]}}],
+  "output": {"dir": "unused", "attributes": ["mass", "age", "force"]}})";
+}
+
+TEST_CASE("run writes every frame and stats.csv", "[cli]") {
+  std::string dir = temp_dir("cli_run");
+  std::string graph = write_file(dir, "drop.json", kGraph);
+  std::string out = dir + "/out";
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --frames 3", dir + "/log") == 0);
+  for (int f = 1; f <= 3; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "/frame_%04d.ply", f);
+    REQUIRE(fs::exists(out + name));
+  }
+  CHECK_FALSE(fs::exists(out + "/frame_0004.ply"));  // --frames overrides the graph's 4
+  for (auto& e : fs::directory_iterator(out)) CHECK(e.path().extension() != ".tmp");
+  ParticleStore last = read_ply(out + "/frame_0003.ply");
+  CHECK(last.size() == 27);
+  CHECK(last.has("mass"));
+  CHECK(last.has("force"));
+  std::string stats = read_text(out + "/stats.csv");
+  CHECK_THAT(stats, Catch::StartsWith("frame,time,points,constraints,wall_ms,max_penetration,"
+                                      "mean_penetration,max_strain,kinetic_energy\n"));
+  CHECK(std::count(stats.begin(), stats.end(), '\n') == 4);
+  CHECK_THAT(stats, Catch::Contains("\n3,0.125,27,0,"));
+  // not a terminal: one log line per frame
+  std::string log = read_text(dir + "/log");
+  CHECK_THAT(log, Catch::Contains("frame 1/3"));
+  CHECK_THAT(log, Catch::Contains("frame 3/3"));
+}
+
+TEST_CASE("--quiet prints nothing and --set overrides a parameter", "[cli]") {
+  std::string dir = temp_dir("cli_set");
+  std::string graph = write_file(dir, "drop.json", kGraph);
+  REQUIRE(run_grains("run " + graph + " --out " + dir + "/a --frames 1 --quiet --set src.separation=0.15",
+                     dir + "/log") == 0);
+  CHECK(read_text(dir + "/log").empty());
+  CHECK(read_ply(dir + "/a/frame_0001.ply").size() == 8);  // 0.3 m at 0.15 m: 2 per side
+  CHECK(run_grains("run " + graph + " --out " + dir + "/b --set src.separation=-1", dir + "/log2") == 2);
+  CHECK_THAT(read_text(dir + "/log2"), Catch::Contains("/nodes/0/params/separation"));
+}
+
+TEST_CASE("bad input exits with 2 and says where", "[cli]") {
+  std::string dir = temp_dir("cli_bad");
+  std::string bad = write_file(dir, "bad.json", std::string(kGraph).replace(std::string(kGraph).find("\"fps\": 24"), 9, "\"fps\": 0"));
+  CHECK(run_grains("validate " + bad, dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains(bad + ": /fps: fps must be greater than 0"));
+  CHECK(run_grains("run " + bad + " --out " + dir + "/o", dir + "/log") == 2);
+  CHECK_FALSE(fs::exists(dir + "/o"));  // refused before any frame
+  CHECK(run_grains("run " + dir + "/missing.json", dir + "/log") == 2);
+  CHECK(run_grains("run", dir + "/log") == 2);
+  std::string good = write_file(dir, "good.json", kGraph);
+  CHECK(run_grains("validate " + good, dir + "/log") == 0);
+}
+
+TEST_CASE("nodes prints every type's parameters from their declarations", "[cli]") {
+  std::string dir = temp_dir("cli_nodes");
+  REQUIRE(run_grains("nodes", dir + "/log") == 0);
+  std::string all = read_text(dir + "/log");
+  for (const char* t : {"source", "group", "force", "merge", "kill", "collider", "solver", "grains"})
+    CHECK_THAT(all, Catch::Contains(std::string(t) + ": "));
+  REQUIRE(run_grains("nodes grains --markdown", dir + "/md") == 0);
+  std::string md = read_text(dir + "/md");
+  CHECK_THAT(md, Catch::StartsWith("## grains"));
+  CHECK_THAT(md, Catch::Contains("| `constraint_iterations` | int | `10` |"));
+  CHECK_THAT(md, Catch::Contains("`repulsionweight`"));
+  CHECK(run_grains("nodes nosuch", dir + "/log") == 2);
+}

@@ -86,10 +86,23 @@ class GrainsSolver {
                size_t collider_count, GrainsStats* stats = nullptr);
 
  private:
+  void find_planes(const float* P, const float* p, const ColliderState* colliders,
+                   size_t collider_count, float query_scale, int threads);
+
   NeighborSearch search_;
   NeighborList neighbors_;
-  std::vector<float> p_, p_next_, P0_, inv_mass_, plane_;  // scratch, reused between substeps
-  std::vector<int32_t> plane_collider_;
+  // scratch, reused between substeps (n = grains this substep)
+  std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
+  std::vector<float> P0_;           // (n x 3) m: P at the start of the substep
+  // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
+  std::vector<float> pair_normal_, pair_normal_it_;  // (neighbour entries) m
+  std::vector<float> collider_normal_;               // (n) m
+  NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
+  std::vector<float> radius_;       // (n) m: pscale, or particle_separation / 2 when missing
+  std::vector<float> mass_;         // (n) kg: copy of mass, or 1 when missing
+  std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)
+  std::vector<float> plane_;        // (n x 9): collider plane point, normal, surface velocity
+  std::vector<int32_t> plane_collider_;  // (n): collider index of the plane, -1 none
 };
 
 }  // namespace grains

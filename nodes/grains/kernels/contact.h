@@ -1,0 +1,127 @@
+/* Grain-grain contact and friction (Macklin, Müller, Chentanez, Kim 2014, "Unified Particle
+ * Physics for Real-Time Applications", §6.1; help page "Internal Collisions", "Friction").
+ *
+ * Contact, eq. 22: C = |x_ij| - (r_i + r_j) >= 0. With overlap d = (r_i + r_j) - |x_ij| > 0 and
+ * n = x_ij / |x_ij| (from j to i):
+ *   dp_i = w_i / (w_i + w_j) * d * n * repulsion_weight * repulsionweight_i
+ *          * min(1, repulsion_stiffness * repulsionstiffness_i / (substeps * iterations)).
+ *
+ * Friction, eqs. 23-25: the pair's relative displacement over the substep
+ *   dx = (p_i - P_i) - (p_j - P_j), its tangential part dx_t = dx - (dx . n) n;
+ *   |dx_t| <  static_threshold * d':  remove all of it (static),
+ *   otherwise remove the fraction min(1, scale_kinetic * d' / |dx_t|) (kinetic),
+ * i's share w_i / (w_i + w_j). The friction scale (friction_with_particles x the `friction`
+ * attribute) multiplies the overlap bound, d' = scale * d: it is the Coulomb coefficient, so
+ * 0 = no friction and the sticking angle rises with it. Friction is bounded by overlap, so it
+ * grows when contacts are soft (help page note). */
+#ifndef GRAINS_KERNELS_CONTACT_H
+#define GRAINS_KERNELS_CONTACT_H
+#include "clumping.h"
+
+/* eqs. 23-25: the correction removing slip dx along the plane normal n, bound d (>= 0) */
+GR_INLINE gr_float3 gr_friction(gr_float3 dx, gr_float3 n, float bound, float static_threshold,
+                                float scale_kinetic) {
+  gr_float3 dxt = gr_madd(dx, n, -gr_dot(dx, n));
+  float len = gr_length(dxt);
+  if (!(len > 0.0f) || !(bound > 0.0f)) return gr_make3(0.0f, 0.0f, 0.0f);
+  if (len < static_threshold * bound) return gr_scale(dxt, -1.0f);
+  return gr_scale(dxt, -gr_min(1.0f, scale_kinetic * bound / len));
+}
+
+/* i's repulsion scale: weight x stiffness fraction, both with their point attributes */
+GR_INLINE float gr_repulsion_scale(const gr_grains* g, const gr_params* prm, int i) {
+  float k = prm->repulsion_stiffness * gr_attr(g->repulsionstiffness, i);
+  float fraction = gr_max(0.0f, gr_min(1.0f, k / prm->stiffness_denominator));
+  return prm->repulsion_weight * gr_attr(g->repulsionweight, i) * fraction;
+}
+
+/* the unit direction from j to i; coincident grains separate along +-y by index so the pair
+ * still moves apart (deterministically) */
+GR_INLINE gr_float3 gr_pair_normal(gr_float3 xij, float dist, int i, int j) {
+  if (dist > 0.0f) return gr_scale(xij, 1.0f / dist);
+  return gr_make3(0.0f, i < j ? -1.0f : 1.0f, 0.0f);
+}
+
+/* Friction of pair (i, j) with overlap bound `overlap` (before the friction scale), i's share */
+GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
+                                     const GR_GLOBAL float* p, int i, int j, gr_float3 n,
+                                     float overlap, float share) {
+  gr_float3 dx = gr_sub(gr_sub(gr_load3(p, i), gr_load3(g->P, i)),
+                        gr_sub(gr_load3(p, j), gr_load3(g->P, j)));
+  float bound = prm->friction_with_particles * gr_attr(g->friction, i) * overlap;
+  return gr_scale(gr_friction(dx, n, bound, prm->static_threshold, prm->scale_kinetic), share);
+}
+
+/* One Jacobi iteration's pair corrections of grain i (contacts, with friction when
+ * `with_friction`, and clumping), read from the iterate p. Adds to *sum, returns how many
+ * constraints produced a nonzero correction. When `overlap_out` is not null it receives, per
+ * entry of i's neighbour row, the contact overlap seen this iteration (0: no contact). */
+GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
+                              int i, int with_friction, GR_GLOBAL float* overlap_out,
+                              gr_float3* sum) {
+  int count = 0;
+  gr_float3 pi = gr_load3(p, i);
+  float ri = g->radius[i];
+  float repulse = prm->repulsion_weight > 0.0f ? gr_repulsion_scale(g, prm, i) : 0.0f;
+  float clump = prm->clumping_weight > 0.0f ? gr_clump_scale(g, prm, i) : 0.0f;
+  int fric = with_friction && prm->friction_with_particles > 0.0f;
+  gr_uint k;
+  for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
+    int j = (int)g->nbr_indices[k];
+    if (overlap_out) overlap_out[k] = 0.0f;
+    if (j == i) continue;
+    gr_float3 xij = gr_sub(pi, gr_load3(p, j));
+    float dist = gr_length(xij);
+    float rsum = ri + g->radius[j];
+    gr_float3 corr;
+    if (dist < rsum) {
+      if (!(repulse > 0.0f)) continue;
+      gr_float3 n = gr_pair_normal(xij, dist, i, j);
+      float d = rsum - dist;
+      float share = gr_pair_share(g, prm, i, j);
+      corr = gr_scale(n, share * d * repulse);
+      if (fric) corr = gr_add(corr, gr_pair_friction(g, prm, p, i, j, n, d, share));
+      if (overlap_out) overlap_out[k] = d;
+    } else if (clump > 0.0f && dist < prm->query_scale * rsum) {
+      gr_float3 n = gr_scale(xij, 1.0f / dist);
+      corr = gr_clump_pair(n, dist - rsum, gr_plain_share(g, i, j), clump);
+    } else {
+      continue;
+    }
+    if (corr.x != 0.0f || corr.y != 0.0f || corr.z != 0.0f) {
+      *sum = gr_add(*sum, corr);
+      ++count;
+    }
+  }
+  return count;
+}
+
+/* The friction pass after the constraint loop (accurate_friction off): friction only, once,
+ * bounded by each contact's accumulated overlap `normal` (per neighbour entry): the sum over the
+ * iterations of the overlap each saw, divided like the corrections by the grain's constraint
+ * count. It is the position-level normal impulse the contact delivered (Coulomb: friction <= mu
+ * x normal impulse) and, like the per-iteration bound of accurate friction, grows when contacts
+ * are soft and with iterations (help page notes). The final overlap alone would vanish whenever
+ * a contact converged. */
+GR_INLINE int gr_gather_pair_friction(const gr_grains* g, const gr_params* prm,
+                                      const GR_GLOBAL float* p, const GR_GLOBAL float* normal,
+                                      int i, gr_float3* sum) {
+  int count = 0;
+  gr_float3 pi = gr_load3(p, i);
+  gr_uint k;
+  for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
+    int j = (int)g->nbr_indices[k];
+    float d = normal[k];
+    if (j == i || !(d > 0.0f)) continue;
+    gr_float3 xij = gr_sub(pi, gr_load3(p, j));
+    gr_float3 n = gr_pair_normal(xij, gr_length(xij), i, j);
+    gr_float3 corr = gr_pair_friction(g, prm, p, i, j, n, d, gr_pair_share(g, prm, i, j));
+    if (corr.x != 0.0f || corr.y != 0.0f || corr.z != 0.0f) {
+      *sum = gr_add(*sum, corr);
+      ++count;
+    }
+  }
+  return count;
+}
+
+#endif /* GRAINS_KERNELS_CONTACT_H */

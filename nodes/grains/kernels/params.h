@@ -1,0 +1,58 @@
+/* Plain-data inputs of the grains kernels: the substep's parameters (gr_params, filled once per
+ * substep from GrainsSettings) and the per-grain arrays they read (gr_grains). Optional point
+ * attributes are null when missing; gr_attr() then reads 1. */
+#ifndef GRAINS_KERNELS_PARAMS_H
+#define GRAINS_KERNELS_PARAMS_H
+#include "prelude.h"
+
+typedef struct {
+  float dt;                    /* substep length (s) */
+  float stiffness_denominator; /* substeps * constraint_iterations: k -> min(1, k / this) */
+  /* internal collisions; weight 0 = off */
+  float repulsion_weight;
+  float repulsion_stiffness;
+  /* friction (Macklin 2014 eqs. 23-25) */
+  float friction_with_particles;
+  float friction_with_colliders;
+  float static_threshold;
+  float scale_kinetic;
+  /* mass-shock scaling: 0 off, 1 global (inv_mass holds 1/shockmass), 2 local */
+  int mass_shock;
+  float shock_power;          /* local: already clamped to 7 */
+  float shock_inv_separation; /* 1 / particle_separation (1/m) */
+  float shock_axis_x, shock_axis_y, shock_axis_z; /* unit */
+  float shock_origin_x, shock_origin_y, shock_origin_z;
+  /* clumping; weight 0 = off */
+  float clumping_weight;
+  float clumping_stiffness;
+  float query_scale; /* neighbor_query_scale: clumping range in units of r_i + r_j */
+  /* averaging */
+  float over_relaxation;
+  int disable_averaging;
+  /* velocity update */
+  float velocity_blend;
+  float max_acceleration; /* m/s^2 */
+  float max_speed;        /* m/s */
+  float drift_threshold;  /* m/s */
+} gr_params;
+
+typedef struct {
+  const GR_GLOBAL float* P;        /* (n x 3) m, start of substep */
+  const GR_GLOBAL float* v;        /* (n x 3) m/s, start of substep */
+  const GR_GLOBAL float* force;    /* (n x 3) N */
+  const GR_GLOBAL float* mass;     /* (n) kg */
+  const GR_GLOBAL float* radius;   /* (n) m */
+  const GR_GLOBAL float* inv_mass; /* (n) 1/kg: 1/mass, or 1/shockmass with global mass-shock */
+  const GR_GLOBAL float* friction;            /* (n) optional */
+  const GR_GLOBAL float* repulsionweight;     /* (n) optional */
+  const GR_GLOBAL float* repulsionstiffness;  /* (n) optional */
+  const GR_GLOBAL float* attractionweight;    /* (n) optional */
+  const GR_GLOBAL float* attractionstiffness; /* (n) optional */
+  const GR_GLOBAL gr_uint* nbr_offsets;       /* (n + 1) neighbour rows, or null: no pairs */
+  const GR_GLOBAL gr_uint* nbr_indices;
+  /* (n x 9): collider contact plane per grain: surface point (m), unit normal, surface velocity
+   * (m/s); a zero normal means no collider within range. Null when there are no colliders. */
+  const GR_GLOBAL float* plane;
+} gr_grains;
+
+#endif /* GRAINS_KERNELS_PARAMS_H */

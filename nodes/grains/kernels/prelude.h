@@ -1,0 +1,74 @@
+/* Prelude shared by the grains kernels: qualifiers, a 3-vector and math names for C++ (the CPU
+ * backend) and OpenCL C (a thin __kernel per header). Everything below is the common subset of
+ * C and OpenCL C: no references, templates, std:: or C++ casts.
+ *
+ * Math goes through gr_sqrt / gr_exp / gr_min / gr_max because OpenCL C spells them sqrt, exp,
+ * fmin, fmax (overloaded) while C spells the float versions sqrtf, expf, fminf, fmaxf. */
+#ifndef GRAINS_KERNELS_PRELUDE_H
+#define GRAINS_KERNELS_PRELUDE_H
+
+#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+
+#define GR_GLOBAL __global
+#define GR_INLINE static inline
+typedef float3 gr_float3;
+typedef uint gr_uint;
+#define gr_sqrt(x) sqrt(x)
+#define gr_exp(x) exp(x)
+#define gr_min(a, b) fmin((a), (b))
+#define gr_max(a, b) fmax((a), (b))
+#define GR_NULL 0
+
+GR_INLINE gr_float3 gr_make3(float x, float y, float z) { return (float3)(x, y, z); }
+GR_INLINE gr_float3 gr_add(gr_float3 a, gr_float3 b) { return a + b; }
+GR_INLINE gr_float3 gr_sub(gr_float3 a, gr_float3 b) { return a - b; }
+GR_INLINE gr_float3 gr_scale(gr_float3 a, float s) { return a * s; }
+GR_INLINE float gr_dot(gr_float3 a, gr_float3 b) { return dot(a, b); }
+GR_INLINE gr_float3 gr_load3(const __global float* a, int i) { return vload3(i, a); }
+GR_INLINE void gr_store3(__global float* a, int i, gr_float3 v) { vstore3(v, i, a); }
+
+#else /* C / C++ */
+
+#include <math.h>
+
+#define GR_GLOBAL
+#define GR_INLINE static inline
+typedef struct {
+  float x, y, z;
+} gr_float3;
+typedef unsigned int gr_uint;
+#define gr_sqrt(x) sqrtf(x)
+#define gr_exp(x) expf(x)
+#define gr_min(a, b) fminf((a), (b))
+#define gr_max(a, b) fmaxf((a), (b))
+#define GR_NULL 0
+
+GR_INLINE gr_float3 gr_make3(float x, float y, float z) {
+  gr_float3 r;
+  r.x = x;
+  r.y = y;
+  r.z = z;
+  return r;
+}
+GR_INLINE gr_float3 gr_add(gr_float3 a, gr_float3 b) { return gr_make3(a.x + b.x, a.y + b.y, a.z + b.z); }
+GR_INLINE gr_float3 gr_sub(gr_float3 a, gr_float3 b) { return gr_make3(a.x - b.x, a.y - b.y, a.z - b.z); }
+GR_INLINE gr_float3 gr_scale(gr_float3 a, float s) { return gr_make3(a.x * s, a.y * s, a.z * s); }
+GR_INLINE float gr_dot(gr_float3 a, gr_float3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+GR_INLINE gr_float3 gr_load3(const float* a, int i) {
+  return gr_make3(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+}
+GR_INLINE void gr_store3(float* a, int i, gr_float3 v) {
+  a[3 * i] = v.x;
+  a[3 * i + 1] = v.y;
+  a[3 * i + 2] = v.z;
+}
+
+#endif
+
+GR_INLINE float gr_length(gr_float3 a) { return gr_sqrt(gr_dot(a, a)); }
+/* a + s * b */
+GR_INLINE gr_float3 gr_madd(gr_float3 a, gr_float3 b, float s) { return gr_add(a, gr_scale(b, s)); }
+/* a point attribute that scales a parameter: missing (null) = 1 */
+GR_INLINE float gr_attr(const GR_GLOBAL float* a, int i) { return a ? a[i] : 1.0f; }
+
+#endif /* GRAINS_KERNELS_PRELUDE_H */

@@ -1,0 +1,320 @@
+// The grains PBD substep (DESIGN §4). Glue only: it fills the kernels' plain-data inputs, runs
+// the neighbour search and the collider queries, and loops over grains calling the per-grain
+// math in kernels/*.h. Order of one substep:
+//   1. predict p = P + dt (v + dt f/m)                                  (kernels/velocity.h)
+//   2. neighbour candidates from p (neighbor_query_scale, max_neighbors) and one collider plane
+//      per grain (the nearest collider within range), once, or every iteration when asked
+//   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h);
+//      without accurate_friction one friction-only pass follows the loop
+//   4. v from the motion, blend and caps, drift (kernels/velocity.h); the final collision pass
+//      (swept, so thin and moving colliders hold); write P and v; stats.
+// Every loop over grains is `omp parallel for schedule(static)` and each grain writes only its
+// own slots, so the result is bit-identical for any thread count; stats are reduced serially.
+#include "nodes/grains/solver.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "nodes/grains/kernels/iterate.h"
+#include "nodes/grains/kernels/mass_shock.h"
+#include "nodes/grains/kernels/velocity.h"
+
+namespace grains {
+namespace {
+
+gr_params make_params(const GrainsSettings& s) {
+  gr_params k;
+  std::memset(&k, 0, sizeof k);
+  k.dt = s.dt;
+  k.stiffness_denominator =
+      static_cast<float>(std::max(1, s.substeps) * std::max(1, s.constraint_iterations));
+  k.repulsion_weight = s.repulsion_weight;
+  k.repulsion_stiffness = s.repulsion_stiffness;
+  k.friction_with_particles = s.friction_with_particles;
+  k.friction_with_colliders = s.friction_with_colliders;
+  k.static_threshold = s.static_threshold;
+  k.scale_kinetic = s.scale_kinetic;
+  k.mass_shock = static_cast<int>(s.mass_shock);
+  // local: "because of the approximation of the exponential used, the effective shock scaling
+  // power is clamped to approximately seven" (help page)
+  k.shock_power = s.mass_shock == MassShock::Local ? std::min(s.shock_scaling_power, 7.0f)
+                                                   : s.shock_scaling_power;
+  k.shock_inv_separation = s.particle_separation > 0 ? 1.0f / s.particle_separation : 0.0f;
+  Vec3 axis = normalized(s.shock_axis);
+  k.shock_axis_x = axis.x;
+  k.shock_axis_y = axis.y;
+  k.shock_axis_z = axis.z;
+  k.shock_origin_x = s.shock_origin.x;
+  k.shock_origin_y = s.shock_origin.y;
+  k.shock_origin_z = s.shock_origin.z;
+  k.clumping_weight = s.clumping_weight;
+  k.clumping_stiffness = s.clumping_stiffness;
+  k.query_scale = s.neighbor_query_scale;
+  k.over_relaxation = s.over_relaxation;
+  k.disable_averaging = s.disable_constraint_averaging ? 1 : 0;
+  k.velocity_blend = s.velocity_blend;
+  k.max_acceleration = s.max_acceleration;
+  k.max_speed = s.max_speed;
+  k.drift_threshold = s.drift_threshold;
+  return k;
+}
+
+inline Vec3 to_vec(gr_float3 a) { return {a.x, a.y, a.z}; }
+
+// Removes the velocity component into a collider, relative to the collider's own motion.
+void remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocity) {
+  float vn = dot(v - collider_velocity, n);
+  if (vn < 0) v -= n * vn;
+}
+
+// The final collision pass for one grain moving from a (start, world) to b (end, world) with
+// velocity v, radius r: against each collider in turn,
+//  - an end point closer than r to the surface is pushed out to distance r along the normal;
+//  - otherwise a path that came within r/2 of the surface somewhere between a and b (the sphere
+//    trace of ColliderState::sweep, relative to the collider's motion) tunnelled through a thin
+//    or moving collider: the grain is put where the trace first reached distance r, carried by
+//    the collider to its end pose, and pushed out to r. The r/2 test keeps grains sliding along
+//    a surface at distance ~r from counting as hits.
+// Either way the velocity component into the collider is removed.
+void final_collision(const ColliderState* colliders, size_t collider_count, const Vec3& a,
+                     Vec3& b, Vec3& v, float r) {
+  for (size_t c = 0; c < collider_count; ++c) {
+    const ColliderState& col = colliders[c];
+    Vec3 n;
+    float e = col.distance(b, &n);
+    if (e < r) {
+      b += n * (r - e);
+      remove_inward_velocity(v, n, col.velocity_at(b));
+      continue;
+    }
+    float t_half = col.sweep(a, b, 0.5f * r);
+    if (!(t_half > 0.0f && t_half <= 1.0f)) continue;  // 0: started deep (and left), > 1: no hit
+    float t = std::min(col.sweep(a, b, r), t_half);
+    Vec3 la = col.prev_pose.inverse(a), lb = col.pose.inverse(b);
+    Vec3 h = col.pose.apply(la + (lb - la) * t);
+    float eh = col.distance(h, &n);
+    if (eh < r) h += n * (r - eh);
+    b = h;
+    remove_inward_velocity(v, n, col.velocity_at(b));
+  }
+}
+
+}  // namespace
+
+void GrainsSolver::find_planes(const float* P, const float* p, const ColliderState* colliders,
+                               size_t collider_count, float query_scale, int threads) {
+  const long n = static_cast<long>(radius_.size());
+  float* plane = plane_.data();
+  int32_t* which = plane_collider_.data();
+  const float* radius = radius_.data();
+  // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
+  // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
+  // toward where it came from still finds the surface it moved away from.
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < n; ++i) {
+    Vec3 x = load3(p, i);
+    float range = query_scale * radius[i] + length(x - load3(P, i));
+    float best = std::numeric_limits<float>::infinity();
+    int32_t best_c = -1;
+    Vec3 best_n;
+    for (size_t c = 0; c < collider_count; ++c) {
+      Vec3 nc;
+      float dist = colliders[c].distance(x, &nc);
+      if (dist < range && dist < best) {
+        best = dist;
+        best_c = static_cast<int32_t>(c);
+        best_n = nc;
+      }
+    }
+    which[i] = best_c;
+    float* pl = plane + 9 * i;
+    if (best_c < 0) {
+      std::fill(pl, pl + 9, 0.0f);
+      continue;
+    }
+    Vec3 xs = x - best_n * best;
+    Vec3 vc = colliders[best_c].velocity_at(xs);
+    store3(pl, 0, xs);
+    store3(pl, 1, best_n);
+    store3(pl, 2, vc);
+  }
+}
+
+void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
+                           size_t collider_count, GrainsStats* stats) {
+  if (stats) *stats = GrainsStats{};
+  const size_t n = d.n;
+  if (n == 0) return;
+  const long ln = static_cast<long>(n);
+  const int threads = s.threads > 0 ? s.threads : omp_get_max_threads();
+  const int iterations = std::max(0, s.constraint_iterations);
+  const gr_params prm = make_params(s);
+  if (!(collider_count > 0 && colliders)) collider_count = 0;
+
+  // per-grain inputs the kernels read: radius, mass, inverse mass (or 1/shockmass)
+  radius_.resize(n);
+  mass_.resize(n);
+  inv_mass_.resize(n);
+  P0_.assign(d.P, d.P + 3 * n);
+  const float default_radius = 0.5f * s.particle_separation;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    radius_[i] = d.pscale ? d.pscale[i] : default_radius;
+    float m = d.mass ? d.mass[i] : 1.0f;
+    mass_[i] = m;
+    if (s.mass_shock == MassShock::Global) {
+      // written "prior to iterating" (help page), from the start-of-substep position
+      float sm = gr_shockmass(&prm, m, gr_load3(d.P, static_cast<int>(i)));
+      if (d.shockmass) d.shockmass[i] = sm;
+      inv_mass_[i] = sm > 0 ? 1.0f / sm : 0.0f;
+    } else {
+      inv_mass_[i] = m > 0 ? 1.0f / m : 0.0f;
+    }
+  }
+
+  // pairs are needed for contacts or clumping; weight 0 for both skips neighbour search and the
+  // pair loop entirely
+  const bool pairs_on = s.repulsion_weight > 0 || s.clumping_weight > 0;
+  const bool colliders_on = collider_count > 0;
+
+  gr_grains g;
+  std::memset(&g, 0, sizeof g);
+  g.P = P0_.data();
+  g.v = d.v;
+  g.force = d.force;
+  g.mass = mass_.data();
+  g.radius = radius_.data();
+  g.inv_mass = inv_mass_.data();
+  g.friction = d.friction;
+  g.repulsionweight = d.repulsionweight;
+  g.repulsionstiffness = d.repulsionstiffness;
+  g.attractionweight = d.attractionweight;
+  g.attractionstiffness = d.attractionstiffness;
+
+  // 1. predict
+  p_.resize(3 * n);
+  p_next_.resize(3 * n);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) gr_predict(&g, &prm, p_.data(), static_cast<int>(i));
+
+  // without accurate friction, one friction pass follows the loop, bounded by each contact's
+  // accumulated overlap
+  const bool pair_friction_pass =
+      !s.accurate_friction && pairs_on && s.repulsion_weight > 0 && s.friction_with_particles > 0;
+  const bool collider_friction_pass =
+      !s.accurate_friction && colliders_on && s.friction_with_colliders > 0;
+  gr_normal_sums acc{nullptr, nullptr, nullptr};
+  if (collider_friction_pass) {
+    collider_normal_.assign(n, 0.0f);
+    acc.collider = collider_normal_.data();
+  }
+
+  // 2. neighbour candidates and collider planes from the predicted positions
+  NeighborQuery q;
+  q.query_scale = s.neighbor_query_scale;
+  q.max_neighbors = s.max_neighbors;
+  q.uniform_radius = s.assume_uniform_radius;
+  q.threads = threads;
+  auto find_pairs = [&](bool first) {
+    if (!first && pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
+    search_.find(p_.data(), radius_.data(), n, q, neighbors_);
+    g.nbr_offsets = neighbors_.offsets.data();
+    g.nbr_indices = neighbors_.indices.data();
+    if (!pair_friction_pass) return;
+    const size_t entries = neighbors_.indices.size();
+    pair_normal_it_.resize(entries);
+    if (first) {
+      pair_normal_.assign(entries, 0.0f);
+    } else {
+      // carry each pair's accumulated overlap over to its slot in the rebuilt rows
+      std::vector<float> old;
+      old.swap(pair_normal_);
+      pair_normal_.assign(entries, 0.0f);
+#pragma omp parallel for schedule(static) num_threads(threads)
+      for (long i = 0; i < ln; ++i)
+        for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
+          for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
+            if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
+              pair_normal_[k] = old[m];
+              break;
+            }
+    }
+    acc.pair_iteration = pair_normal_it_.data();
+    acc.pair = pair_normal_.data();
+  };
+  if (pairs_on) find_pairs(true);
+  if (colliders_on) {
+    plane_.resize(9 * n);
+    plane_collider_.resize(n);
+    find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+    g.plane = plane_.data();
+  }
+
+  // 3. Jacobi iterations
+  const int with_friction = s.accurate_friction ? 1 : 0;
+  for (int it = 0; it < iterations; ++it) {
+    if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
+    if (it > 0 && colliders_on && s.update_collisions_during_iterations)
+      find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+    const float* p = p_.data();
+    float* next = p_next_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) {
+      int ii = static_cast<int>(i);
+      gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &acc));
+    }
+    p_.swap(p_next_);
+  }
+  if (pair_friction_pass || collider_friction_pass) {
+    const float* p = p_.data();
+    float* next = p_next_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) {
+      int ii = static_cast<int>(i);
+      gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
+    }
+    p_.swap(p_next_);
+  }
+
+  // 4. velocity, drift, final collisions; write P and v
+  {
+    const float* p = p_.data();
+    const bool final_test = s.final_collision_test && colliders_on;
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) {
+      int ii = static_cast<int>(i);
+      gr_float3 Pk, vk;
+      gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
+      Vec3 b = to_vec(Pk), v = to_vec(vk);
+      if (final_test) final_collision(colliders, collider_count, load3(P0_.data(), i), b, v, radius_[i]);
+      store3(d.P, i, b);
+      store3(d.v, i, v);
+    }
+  }
+
+  // stats: serial, in a fixed order
+  if (stats && pairs_on) {
+    double sum = 0;
+    for (size_t i = 0; i < n; ++i) {
+      Vec3 pi = load3(d.P, i);
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
+        uint32_t j = neighbors_.indices[k];
+        if (j <= i) continue;
+        float rsum = radius_[i] + radius_[j];
+        float overlap = rsum - length(pi - load3(d.P, j));
+        if (overlap <= 0) continue;
+        float pen = overlap / rsum;
+        stats->max_penetration = std::max(stats->max_penetration, pen);
+        sum += pen;
+        ++stats->contacts;
+      }
+    }
+    if (stats->contacts) stats->mean_penetration = static_cast<float>(sum / stats->contacts);
+  }
+}
+
+}  // namespace grains

@@ -1,0 +1,145 @@
+// A small harness for the grains solver tests: grains as parallel arrays, gravity as a force
+// (force = mass * g, as the POP solver's force nodes would write it), collider states whose
+// poses advance with the substeps, and a loop that calls GrainsSolver::substep.
+#pragma once
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <vector>
+
+#include "engine/collider.h"
+#include "nodes/grains/solver.h"
+
+namespace grains::test {
+
+constexpr float kG = 9.81f;
+
+// prints a measured number when GRAINS_VERBOSE is set (the report quotes these)
+inline void report(const char* what, double value) {
+  if (std::getenv("GRAINS_VERBOSE")) std::printf("  [grains] %-60s %.6g\n", what, value);
+}
+
+inline GrainsSettings settings(float fps, int substeps, int iterations) {
+  GrainsSettings s;
+  s.substeps = substeps;
+  s.dt = 1.0f / (fps * static_cast<float>(substeps));
+  s.constraint_iterations = iterations;
+  s.threads = 2;
+  return s;
+}
+
+inline ColliderState ground(float y = 0.0f) {
+  ColliderState c;
+  c.name = "ground";
+  c.shape.kind = ShapeKind::Plane;
+  c.pose.t = {0, y, 0};
+  c.prev_pose = c.pose;
+  return c;
+}
+
+// The plane y = 0 rotated about z by `deg` degrees: normal (-sin, cos, 0); a grain on it slides
+// toward -(cos, sin, 0).
+inline ColliderState incline(float deg) {
+  ColliderState c;
+  c.name = "incline";
+  c.shape.kind = ShapeKind::Plane;
+  c.pose = Pose::from_trs({0, 0, 0}, {0, 0, deg}, 1.0f);
+  c.prev_pose = c.pose;
+  return c;
+}
+
+inline ColliderState box(const Vec3& centre, const Vec3& size) {
+  ColliderState c;
+  c.name = "box";
+  c.shape.kind = ShapeKind::Box;
+  c.shape.size = size;
+  c.pose.t = centre;
+  c.prev_pose = c.pose;
+  return c;
+}
+
+struct Scene {
+  std::vector<float> P, v, force, mass, pscale, shockmass;
+  std::vector<float> friction;  // optional, empty = missing
+  std::vector<ColliderState> colliders;
+  // collider motion: the pose of collider c at time t (unset = static)
+  std::vector<std::function<Pose(float)>> collider_motion;
+  GrainsSettings s;
+  GrainsSolver solver;
+  Vec3 gravity{0, -kG, 0};
+  std::vector<Vec3> extra_force;  // per grain, added to mass * gravity (optional)
+  float time = 0;
+  GrainsStats stats;
+
+  size_t size() const { return mass.size(); }
+  size_t add(const Vec3& p, float r, float m = 1.0f, const Vec3& vel = {0, 0, 0}) {
+    P.insert(P.end(), {p.x, p.y, p.z});
+    v.insert(v.end(), {vel.x, vel.y, vel.z});
+    force.insert(force.end(), {0, 0, 0});
+    mass.push_back(m);
+    pscale.push_back(r);
+    shockmass.push_back(0);
+    return mass.size() - 1;
+  }
+  Vec3 pos(size_t i) const { return {P[3 * i], P[3 * i + 1], P[3 * i + 2]}; }
+  Vec3 vel(size_t i) const { return {v[3 * i], v[3 * i + 1], v[3 * i + 2]}; }
+  void set_vel(size_t i, const Vec3& u) {
+    v[3 * i] = u.x;
+    v[3 * i + 1] = u.y;
+    v[3 * i + 2] = u.z;
+  }
+  void add_collider(const ColliderState& c, std::function<Pose(float)> motion = nullptr) {
+    colliders.push_back(c);
+    collider_motion.push_back(std::move(motion));
+  }
+
+  GrainsData data() {
+    GrainsData d;
+    d.n = size();
+    d.P = P.data();
+    d.v = v.data();
+    d.force = force.data();
+    d.mass = mass.data();
+    d.pscale = pscale.data();
+    d.friction = friction.empty() ? nullptr : friction.data();
+    d.shockmass = shockmass.data();
+    return d;
+  }
+
+  void substep() {
+    for (size_t i = 0; i < size(); ++i) {
+      Vec3 f = gravity * mass[i];
+      if (!extra_force.empty()) f += extra_force[i];
+      force[3 * i] = f.x;
+      force[3 * i + 1] = f.y;
+      force[3 * i + 2] = f.z;
+    }
+    for (size_t c = 0; c < colliders.size(); ++c) {
+      colliders[c].dt = s.dt;
+      if (collider_motion[c]) {
+        colliders[c].prev_pose = collider_motion[c](time);
+        colliders[c].pose = collider_motion[c](time + s.dt);
+      }
+    }
+    GrainsData d = data();
+    solver.substep(d, s, colliders.data(), colliders.size(), &stats);
+    time += s.dt;
+  }
+  void run(float seconds) {
+    int steps = static_cast<int>(std::lround(seconds / s.dt));
+    for (int k = 0; k < steps; ++k) substep();
+  }
+  float max_y() const {
+    float m = -1e30f;
+    for (size_t i = 0; i < size(); ++i) m = std::max(m, P[3 * i + 1]);
+    return m;
+  }
+  Vec3 centroid() const {
+    Vec3 c;
+    for (size_t i = 0; i < size(); ++i) c += pos(i);
+    return c / static_cast<float>(size());
+  }
+};
+
+}  // namespace grains::test

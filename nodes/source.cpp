@@ -2,6 +2,7 @@
 // packing, optional jitter), or reads points from a PLY/OBJ file; emits once at a frame or at a
 // rate over a frame range, with an initial velocity. pscale defaults to separation/2 and mass
 // comes from density when one is given.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -23,7 +24,9 @@ class SourceNode : public Node {
       if (emitted_ || ctx.time.frame != p.i("birth_frame") || ctx.time.substep != 0) return;
       emitted_ = true;
       std::vector<Vec3> pts = fill(ctx);
+      size_t first = ctx.pts.size();
       emit(ctx, pts);
+      if (p.s("shape") == "file") copy_file_attributes(ctx, first);
     } else {  // rate
       int f = ctx.time.frame;
       if (f < p.i("start_frame") || f > p.i("end_frame")) return;
@@ -44,9 +47,9 @@ class SourceNode : public Node {
     Vec3 c = p.v3("center");
     std::vector<Vec3> out;
     if (shape == "file") {
-      ParticleStore file = read_ply_or_obj(ctx);
-      const float* P = file.v3_if("P");
-      for (size_t k = 0; k < file.size(); ++k) out.push_back(load3(P, k) + c);
+      file_ = read_ply_or_obj(ctx);
+      const float* P = file_.v3_if("P");
+      for (size_t k = 0; k < file_.size(); ++k) out.push_back(load3(P, k) + c);
       return out;
     }
     float s = static_cast<float>(p.f("separation"));
@@ -139,6 +142,35 @@ class SourceNode : public Node {
     }
   }
 
+  // The file's own point attributes (pscale, v, mass, targetP, ...) override the source's
+  // defaults, and its edges become constraints between the new points.
+  void copy_file_attributes(CookContext& ctx, size_t first) {
+    ParticleStore& s = ctx.pts;
+    for (const auto& [name, a] : file_.attributes()) {
+      // the stream and per-substep state belong to this source, not the file
+      if (name == "P" || name == "id" || name == "streamid" || name == "ispbd" || name == "force")
+        continue;
+      Attribute& dst = s.add(name, a.type);
+      int c = a.components();
+      if (a.type == AttribType::Int)
+        std::copy(a.i.begin(), a.i.end(), dst.i.begin() + first);
+      else
+        std::copy(a.f.begin(), a.f.end(), dst.f.begin() + first * c);
+    }
+    if (file_.has("v")) {  // the initial velocity adds to the file's
+      Vec3 vel = ctx.params.v3("velocity");
+      float* v = s.v3("v");
+      for (size_t k = 0; k < file_.size(); ++k) store3(v, first + k, load3(v, first + k) + vel);
+    }
+    const std::vector<int32_t>& e = file_.prim_points();
+    for (size_t p = 0; p < file_.prim_count(); ++p) {
+      size_t q = s.add_prim(static_cast<int32_t>(first) + e[2 * p], static_cast<int32_t>(first) + e[2 * p + 1]);
+      for (const auto& [name, vals] : file_.prim_attributes()) s.prim_f(name)[q] = vals[p];
+    }
+    file_ = ParticleStore();
+  }
+
+  ParticleStore file_;
   bool emitted_ = false;
   double carry_ = 0;
   uint64_t counter_ = 0;

@@ -25,9 +25,12 @@ struct GrainsSettings {
   float particle_separation = 0.1f;  // mean diameter hint (m): missing pscale and mass-shock scale
   bool assume_uniform_radius = true;
   // friction
+  // (Macklin 2014 eqs. 23-25; kernels/contact.h). The friction scales multiply the overlap that
+  // bounds friction, so static_threshold x friction is the Coulomb coefficient (a grain sticks on
+  // an incline while tan(angle) < it) and scale_kinetic x friction the kinetic one.
   float friction_with_colliders = 1.0f;  // x `friction` point attribute
   float friction_with_particles = 1.0f;  // x `friction` point attribute
-  bool accurate_friction = false;        // friction every iteration instead of once after
+  bool accurate_friction = false;        // friction every iteration instead of one pass after
   float static_threshold = 1.0f;         // |dx_t| < static_threshold * overlap: stick
   float scale_kinetic = 0.5f;            // else remove min(1, scale_kinetic * overlap / |dx_t|)
   // internal collisions

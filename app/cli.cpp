@@ -1,6 +1,8 @@
 // The grains program (DESIGN §5). Exit codes: 0 success, 2 bad input, 1 failure while running.
 #include "app/cli.h"
 
+#include "app/bench.h"
+
 #include <omp.h>
 #include <unistd.h>
 
@@ -179,6 +181,9 @@ int cli_main(int argc, char** argv) {
   cook->add_option("--threads", threads, "worker threads")->check(CLI::PositiveNumber);
   cook->add_option("--out", cook_out, "output folder")->required();
 
+  BenchOptions bench_opts;
+  auto* bench = add_bench_command(app, bench_opts, argc, argv);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -204,6 +209,7 @@ int cli_main(int argc, char** argv) {
       print_nodes(only, markdown);
       return 0;
     }
+    if (bench->parsed()) return run_bench(bench_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
                       threads, cook_out);

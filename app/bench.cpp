@@ -275,6 +275,7 @@ struct Machine {
   double mem_gib = 0;
   std::string date;
   std::string commit;
+  bool dirty = false;  // the working tree's engine/, nodes/ or app/ differ from the commit
 };
 
 Machine describe_machine() {
@@ -304,6 +305,9 @@ Machine describe_machine() {
     while (!m.commit.empty() && std::isspace(static_cast<unsigned char>(m.commit.back())))
       m.commit.pop_back();
   }
+  // the sources the program is built from may differ from the commit
+  m.dirty = !m.commit.empty() &&
+            std::system("git diff --quiet HEAD -- engine nodes app CMakeLists.txt 2>/dev/null") != 0;
   return m;
 }
 
@@ -586,7 +590,9 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
      << "- **Date:** " << m.date << "\n"
      << "- **Machine:** " << m.cpu << ", " << m.cores << " cores, "
      << fmt("%.1f", m.mem_gib) << " GiB memory; " << threads << " OpenMP threads\n";
-  if (!m.commit.empty()) md << "- **Commit:** `" << m.commit << "`\n";
+  if (!m.commit.empty())
+    md << "- **Source:** commit `" << m.commit << "`"
+       << (m.dirty ? " with uncommitted changes in engine/, nodes/ or app/" : "") << "\n";
   if (o.quick) md << "- **Quick mode** (`--quick`): a reduced sweep, not the full benchmark\n";
   md << "\nColumns: *s/frame* is stepping time only (no file output, no diagnostics); "
         "*particle-iter/s* is the sum over substeps of points x constraint iterations divided by "
@@ -677,6 +683,10 @@ BenchSweep quick_bench_sweep(const BenchSweep& s) {
   BenchSweep q;
   for (size_t k = 0; k < s.settings.size() && k < 2; ++k) q.settings.push_back(s.settings[k]);
   q.reference = {std::max(1, s.reference.substeps / 2), std::max(1, s.reference.iterations / 2)};
+  for (const auto& st : q.settings) {  // never cheaper than a setting it judges
+    q.reference.substeps = std::max(q.reference.substeps, st.substeps);
+    q.reference.iterations = std::max(q.reference.iterations, st.iterations);
+  }
   q.frames = s.frames > 0 ? std::min(s.frames, kQuickFrames) : -kQuickFrames;  // < 0: min with the graph's
   return q;
 }

@@ -33,7 +33,7 @@ BenchSweep default_bench_sweep();
 // Throws LoadError on a malformed sidecar.
 BenchSweep load_bench_sweep(const std::string& graph_path);
 // The --quick version: the first two settings, the reference at half its substeps and
-// iterations (at least 1 each), at most 12 frames.
+// iterations (at least 1 each, and never below a kept setting's), at most 12 frames.
 BenchSweep quick_bench_sweep(const BenchSweep& s);
 
 struct BenchOptions {

@@ -276,6 +276,7 @@ struct Machine {
   std::string date;
   std::string commit;
   bool dirty = false;  // the working tree's engine/, nodes/ or app/ differ from the commit
+  std::string load;    // /proc/loadavg's 1-minute figure when the benchmark started
 };
 
 Machine describe_machine() {
@@ -294,6 +295,8 @@ Machine describe_machine() {
       m.mem_gib = std::atof(line.c_str() + 9) / (1024.0 * 1024.0);
       break;
     }
+  std::ifstream la("/proc/loadavg");
+  la >> m.load;
   std::time_t now = std::time(nullptr);
   char buf[64];
   std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
@@ -589,7 +592,9 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
      << "```\n" << o.command << "\n```\n\n"
      << "- **Date:** " << m.date << "\n"
      << "- **Machine:** " << m.cpu << ", " << m.cores << " cores, "
-     << fmt("%.1f", m.mem_gib) << " GiB memory; " << threads << " OpenMP threads\n";
+     << fmt("%.1f", m.mem_gib) << " GiB memory; " << threads << " OpenMP threads"
+     << (m.load.empty() ? "" : "; 1-minute load average " + m.load + " when it started")
+     << "\n";
   if (!m.commit.empty())
     md << "- **Source:** commit `" << m.commit << "`"
        << (m.dirty ? " with uncommitted changes in engine/, nodes/ or app/" : "") << "\n";

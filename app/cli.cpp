@@ -17,6 +17,7 @@
 #include "engine/graph.h"
 #include "engine/simulation.h"
 #include "nodes/register.h"
+#include "viewer-offline/render.h"
 
 namespace grains {
 namespace {
@@ -184,6 +185,9 @@ int cli_main(int argc, char** argv) {
   BenchOptions bench_opts;
   auto* bench = add_bench_command(app, bench_opts, argc, argv);
 
+  viewer::RenderOptions render_opts;
+  auto* render = viewer::add_render_subcommand(app, render_opts);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -210,6 +214,7 @@ int cli_main(int argc, char** argv) {
       return 0;
     }
     if (bench->parsed()) return run_bench(bench_opts);
+    if (render->parsed()) return viewer::render_command(render_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
                       threads, cook_out);

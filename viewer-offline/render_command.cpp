@@ -1,0 +1,498 @@
+// `grains render DIR`: two passes over the written frames. The first reads every frame for the
+// scene's bounds (the default camera) and the colour-by range, so that framing and colours stay
+// the same from frame to frame; the second renders each frame to PNG, feeds the video and keeps
+// the contact sheet's thumbnails.
+#include <omp.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "engine/geometry_io.h"
+#include "engine/graph.h"
+#include "nodes/register.h"
+#include "viewer-offline/gif.h"
+#include "viewer-offline/render.h"
+
+namespace grains::viewer {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr int kOk = 0, kRunFailure = 1, kBadInput = 2;
+
+// Bad command-line values or input folder; the message says what.
+struct BadInput : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// One written frame: its number and a file per particle object (empty when an object has none).
+struct FrameFiles {
+  int number = 0;
+  std::vector<std::string> paths;
+};
+
+std::map<int, std::string> frames_in(const fs::path& dir) {
+  static const std::regex name(R"(frame_(\d+)\.ply)");
+  std::map<int, std::string> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    std::smatch m;
+    std::string f = e.path().filename().string();
+    if (e.is_regular_file() && std::regex_match(f, m, name)) out[std::stoi(m[1])] = e.path().string();
+  }
+  return out;
+}
+
+// DIR/frame_*.ply, or one sub-folder per object (what `grains run` writes for several solvers).
+std::vector<FrameFiles> scan_frames(const std::string& dir, std::vector<std::string>& objects) {
+  if (!fs::is_directory(dir)) throw BadInput(dir + ": not a folder");
+  std::vector<std::map<int, std::string>> per_object;
+  auto top = frames_in(dir);
+  if (!top.empty()) {
+    objects = {""};
+    per_object.push_back(top);
+  } else {
+    std::vector<fs::path> subs;
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.is_directory()) subs.push_back(e.path());
+    std::sort(subs.begin(), subs.end());
+    for (const auto& s : subs) {
+      auto f = frames_in(s);
+      if (f.empty()) continue;
+      objects.push_back(s.filename().string());
+      per_object.push_back(std::move(f));
+    }
+  }
+  if (per_object.empty()) throw BadInput(dir + ": no frame_NNNN.ply files (nor sub-folders holding them)");
+  std::set<int> numbers;
+  for (const auto& m : per_object)
+    for (const auto& [k, v] : m) numbers.insert(k);
+  std::vector<FrameFiles> frames;
+  for (int k : numbers) {
+    FrameFiles f;
+    f.number = k;
+    for (const auto& m : per_object) {
+      auto it = m.find(k);
+      f.paths.push_back(it == m.end() ? "" : it->second);
+    }
+    frames.push_back(std::move(f));
+  }
+  return frames;
+}
+
+void parse_size(const std::string& s, int& w, int& h) {
+  static const std::regex re(R"((\d{1,5})[xX](\d{1,5}))");
+  std::smatch m;
+  if (!std::regex_match(s, m, re)) throw BadInput("--size '" + s + "': expected WxH, e.g. 960x540");
+  w = std::stoi(m[1]);
+  h = std::stoi(m[2]);
+  if (w < 8 || h < 8 || w > 16384 || h > 16384)
+    throw BadInput("--size '" + s + "': width and height must be 8 to 16384 pixels");
+}
+
+Camera parse_camera(const std::string& s, int w, int h) {
+  std::vector<float> v;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stof(item, &used));
+      if (item.find_first_not_of(" \t", used) != std::string::npos) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw BadInput("--camera '" + s + "': '" + item + "' is not a number");
+    }
+  }
+  if (v.size() != 7) throw BadInput("--camera '" + s + "': expected ex,ey,ez,tx,ty,tz,fov (7 numbers)");
+  Vec3 eye{v[0], v[1], v[2]}, target{v[3], v[4], v[5]};
+  if (length(target - eye) <= 0) throw BadInput("--camera '" + s + "': eye and target coincide");
+  if (!(v[6] > 1 && v[6] < 179)) throw BadInput("--camera '" + s + "': fov must be between 1 and 179 degrees");
+  return Camera::look_at(eye, target, v[6], w, h);
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string find_on_path(const std::string& exe) {
+  const char* path = std::getenv("PATH");
+  if (!path) return "";
+  std::stringstream ss(path);
+  std::string dir;
+  while (std::getline(ss, dir, ':')) {
+    if (dir.empty()) continue;
+    std::string p = dir + "/" + exe;
+    if (::access(p.c_str(), X_OK) == 0 && fs::is_regular_file(p)) return p;
+  }
+  return "";
+}
+
+std::string shell_quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// The colliders of a graph, posed at any moment from their own parameter tables.
+struct GraphColliders {
+  struct Entry {
+    const NodeDesc* node;
+    ParamSet params;
+    std::string object;  // the first solver that lists it, for $OBJNAME
+  };
+  std::string graph_name;
+  double fps = 24;
+  std::vector<Entry> entries;
+
+  std::vector<ColliderState> at(double st) {
+    std::vector<ColliderState> out;
+    for (Entry& e : entries) {
+      ExprVars v;
+      v.ST = st;
+      v.T = st;
+      v.TIMESTEP = 1.0 / fps;
+      v.SFPS = fps;
+      v.SF = st * fps;
+      v.F = v.SF + 1;
+      v.OBJNAME = e.object;
+      v.DOPNET = graph_name;
+      e.params.evaluate(v);
+      ColliderState c;
+      e.node->info->collider(e.params, c);
+      c.name = e.node->name;
+      out.push_back(c);
+    }
+    return out;
+  }
+};
+
+// What the first pass learns from every frame.
+struct Survey {
+  Bounds bounds;  // grains (P +- pscale) over all frames
+  float vmin = std::numeric_limits<float>::infinity(), vmax = -std::numeric_limits<float>::infinity();
+  bool found = false;  // the colour-by attribute exists somewhere
+  size_t max_points = 0;
+  std::string first_file;
+  std::vector<std::string> point_attribs, edge_attribs;  // of the first frame, for messages
+};
+
+std::vector<ParticleStore> read_objects(const FrameFiles& f) {
+  std::vector<ParticleStore> out;
+  for (const auto& p : f.paths)
+    if (!p.empty()) out.push_back(read_ply(p));
+  return out;
+}
+
+Survey survey(const std::vector<FrameFiles>& frames, const std::string& color_by) {
+  Survey s;
+  s.first_file = frames.front().paths.front();
+  for (const auto& p : frames.front().paths)
+    if (!p.empty()) {
+      s.first_file = p;
+      break;
+    }
+  std::string error;
+  const int64_t n = static_cast<int64_t>(frames.size());
+#pragma omp parallel
+  {
+    Survey mine;
+    std::vector<float> values;
+#pragma omp for schedule(dynamic)
+    for (int64_t k = 0; k < n; ++k) {
+      std::vector<ParticleStore> objs;
+      try {
+        objs = read_objects(frames[k]);
+      } catch (const std::exception& e) {
+#pragma omp critical
+        if (error.empty()) error = e.what();
+        continue;
+      }
+      size_t points = 0;
+      for (const ParticleStore& o : objs) {
+        points += o.size();
+        const float* P = o.v3_if("P");
+        const float* ps = o.f_if("pscale");
+        for (size_t i = 0; i < o.size(); ++i) mine.bounds.add(load3(P, i), ps ? ps[i] : 0);
+        if (color_by.empty()) continue;
+        if (attribute_values(o, color_by, values) == AttribDomain::None) continue;
+        mine.found = true;
+        for (float v : values)
+          if (std::isfinite(v)) {
+            mine.vmin = std::min(mine.vmin, v);
+            mine.vmax = std::max(mine.vmax, v);
+          }
+      }
+      mine.max_points = std::max(mine.max_points, points);
+      if (k == 0 && !objs.empty()) {
+        for (const auto& [name, a] : objs[0].attributes()) mine.point_attribs.push_back(name);
+        for (const auto& [name, a] : objs[0].prim_attributes()) mine.edge_attribs.push_back(name);
+      }
+    }
+#pragma omp critical
+    {
+      s.bounds.add(mine.bounds);
+      s.vmin = std::min(s.vmin, mine.vmin);
+      s.vmax = std::max(s.vmax, mine.vmax);
+      s.found = s.found || mine.found;
+      s.max_points = std::max(s.max_points, mine.max_points);
+      if (!mine.point_attribs.empty() || !mine.edge_attribs.empty()) {
+        s.point_attribs = mine.point_attribs;
+        s.edge_attribs = mine.edge_attribs;
+      }
+    }
+  }
+  if (!error.empty()) throw GeometryError(error);
+  return s;
+}
+
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : " ") + x;
+  return s.empty() ? "(none)" : s;
+}
+
+// Where the rendered frames go besides PNG: ffmpeg through a pipe, or our own GIF writer.
+class VideoSink {
+ public:
+  // Throws BadInput when the file cannot be made here (mp4 without ffmpeg).
+  VideoSink(const std::string& path, int width, int height, double fps) : path_(path) {
+    if (lower(fs::path(path).extension().string()) == ".gif") {
+      factor_ = width > 640 ? 2 : 1;  // GIFs are big: half size above 640 pixels wide
+      gif_ = std::make_unique<GifWriter>(path, width / factor_, height / factor_,
+                                         std::max(2, static_cast<int>(std::lround(100.0 / fps))));
+      return;
+    }
+    std::string ffmpeg = find_on_path("ffmpeg");
+    if (ffmpeg.empty())
+      throw BadInput("--video " + path + ": writing this needs ffmpeg on PATH, and there is none; "
+                     "install it (apt-get install ffmpeg) or ask for a .gif, which needs nothing");
+    char num[64];
+    std::snprintf(num, sizeof num, "%dx%d -framerate %g", width, height, fps);
+    // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
+    std::string cmd = shell_quote(ffmpeg) + " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " + num +
+                      " -i - -vf pad=ceil(iw/2)*2:ceil(ih/2)*2 -pix_fmt yuv420p " + shell_quote(path);
+    std::signal(SIGPIPE, SIG_IGN);  // a dying ffmpeg must give a write error, not kill us
+    pipe_ = ::popen(cmd.c_str(), "w");
+    if (!pipe_) throw std::runtime_error("cannot start " + ffmpeg);
+  }
+  ~VideoSink() {
+    if (pipe_) ::pclose(pipe_);
+  }
+  void add(const Image& img) {
+    if (gif_) {
+      gif_->add_frame(factor_ > 1 ? downscale(img, factor_) : img);
+      return;
+    }
+    if (std::fwrite(img.rgb.data(), 1, img.rgb.size(), pipe_) != img.rgb.size())
+      throw std::runtime_error("ffmpeg stopped taking frames for " + path_);
+  }
+  void finish() {
+    if (gif_) {
+      gif_->close();
+      return;
+    }
+    int rc = ::pclose(pipe_);
+    pipe_ = nullptr;
+    if (rc != 0) throw std::runtime_error("ffmpeg failed writing " + path_);
+  }
+
+ private:
+  std::string path_;
+  std::unique_ptr<GifWriter> gif_;
+  int factor_ = 1;
+  std::FILE* pipe_ = nullptr;
+};
+
+int run(const RenderOptions& opts) {
+  using clock = std::chrono::steady_clock;
+  auto ms_since = [](clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(clock::now() - t0).count();
+  };
+  auto t_start = clock::now();
+  if (opts.threads > 0) omp_set_num_threads(opts.threads);
+
+  int W = 0, H = 0;
+  parse_size(opts.size, W, H);
+  std::optional<Camera> given_camera;
+  if (!opts.camera.empty()) given_camera = parse_camera(opts.camera, W, H);
+  std::vector<std::string> objects;
+  std::vector<FrameFiles> frames = scan_frames(opts.dir, objects);
+
+  GraphColliders colliders;
+  double fps = 24;
+  Graph graph;
+  if (!opts.graph.empty()) {
+    register_builtin_nodes();
+    graph = load_graph(opts.graph);
+    fps = graph.fps;
+    colliders.graph_name = graph.name;
+    for (const NodeDesc& node : graph.nodes) {
+      if (!node.info || node.info->role != NodeRole::Collider || !node.info->collider) continue;
+      std::string object;
+      for (int s : graph.solvers) {
+        auto it = graph.nodes[s].params.find("colliders");
+        if (it == graph.nodes[s].params.end()) continue;
+        for (const auto& name : it->second.list)
+          if (name == node.name && object.empty()) object = graph.nodes[s].name;
+      }
+      colliders.entries.push_back({&node, ParamSet(node.info->params, node.params), object});
+    }
+  }
+  if (opts.fps > 0) fps = opts.fps;
+  colliders.fps = fps;
+
+  const std::string out = opts.out.empty() ? (fs::path(opts.dir) / "render").string() : opts.out;
+  std::unique_ptr<VideoSink> video;
+  // fail before any work when the video cannot be made
+  if (!opts.video.empty() && lower(fs::path(opts.video).extension().string()) != ".gif" &&
+      find_on_path("ffmpeg").empty())
+    VideoSink(opts.video, W, H, fps);  // throws BadInput with the message
+
+  // ---- pass 1: bounds and colour range over all frames ----
+  auto t_survey = clock::now();
+  Survey sv = survey(frames, opts.color_by);
+  if (!opts.color_by.empty() && !sv.found)
+    throw BadInput("--color-by " + opts.color_by + ": no such point or edge attribute in any frame (" +
+                   sv.first_file + " has points: " + join(sv.point_attribs) +
+                   "; edges: " + join(sv.edge_attribs) + ")");
+  double survey_ms = ms_since(t_survey);
+
+  RenderSettings settings;
+  settings.supersample = opts.supersample;
+  settings.scene = sv.bounds;
+  if (!opts.color_by.empty()) {
+    settings.color_by.attribute = opts.color_by;
+    settings.color_by.min = std::isfinite(sv.vmin) ? sv.vmin : 0.0f;
+    settings.color_by.max = std::isfinite(sv.vmax) ? sv.vmax : 1.0f;
+  }
+  const Camera cam = given_camera ? *given_camera : frame_bounds(sv.bounds, W, H);
+
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) throw std::runtime_error(out + ": cannot create the folder: " + ec.message());
+  if (!opts.video.empty()) {
+    fs::path vp(opts.video);
+    if (vp.has_parent_path()) fs::create_directories(vp.parent_path(), ec);
+    video = std::make_unique<VideoSink>(opts.video, W, H, fps);
+  }
+
+  // ---- pass 2: render ----
+  const std::vector<int> picks = contact_sheet_picks(static_cast<int>(frames.size()), opts.sheet_frames);
+  const ContactSheetLayout layout = contact_sheet_layout(static_cast<int>(picks.size()), W, H);
+  std::vector<Image> thumbs;
+  std::vector<int> thumb_numbers;
+  double read_ms = 0, render_ms = 0, write_ms = 0;
+  size_t next_pick = 0;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const FrameFiles& f = frames[k];
+    auto t0 = clock::now();
+    std::vector<ParticleStore> objs = read_objects(f);
+    read_ms += ms_since(t0);
+
+    t0 = clock::now();
+    std::vector<const ParticleStore*> ptrs;
+    size_t points = 0;
+    for (const auto& o : objs) {
+      ptrs.push_back(&o);
+      points += o.size();
+    }
+    const double st = f.number / fps;
+    char caption[96];
+    std::snprintf(caption, sizeof caption, "frame %d  t %.3f s  %zu grains", f.number, st, points);
+    settings.caption = caption;
+    Image img = render_frame(ptrs, cam, settings, colliders.at(st));
+    render_ms += ms_since(t0);
+
+    t0 = clock::now();
+    char name[64];
+    std::snprintf(name, sizeof name, "frame_%04d.png", f.number);
+    write_png((fs::path(out) / name).string(), img);
+    if (video) video->add(img);
+    write_ms += ms_since(t0);
+    if (next_pick < picks.size() && picks[next_pick] == static_cast<int>(k)) {
+      thumbs.push_back(resize(img, layout.thumb_width, layout.thumb_height));
+      thumb_numbers.push_back(f.number);
+      ++next_pick;
+    }
+    if (!opts.quiet && isatty(fileno(stderr)))
+      std::fprintf(stderr, "\rrender: frame %d (%zu/%zu)   ", f.number, k + 1, frames.size());
+  }
+  if (!opts.quiet && isatty(fileno(stderr))) std::fputc('\n', stderr);
+  const std::string sheet_path = (fs::path(out) / "contact_sheet.png").string();
+  write_png(sheet_path, contact_sheet(thumbs, thumb_numbers, W, H));
+  if (video) video->finish();
+
+  if (!opts.quiet) {
+    const double n = static_cast<double>(frames.size());
+    std::fprintf(stderr,
+                 "render: %zu frames of %dx%d (up to %zu grains) in %.2f s: survey %.0f ms, per frame "
+                 "%.0f ms read + %.0f ms render + %.0f ms write, %d threads\n",
+                 frames.size(), W, H, sv.max_points, ms_since(t_start) / 1000.0, survey_ms, read_ms / n,
+                 render_ms / n, write_ms / n, omp_get_max_threads());
+    if (!opts.color_by.empty())
+      std::fprintf(stderr, "render: %s from %s to %s over all frames\n", opts.color_by.c_str(),
+                   format_value(settings.color_by.min).c_str(), format_value(settings.color_by.max).c_str());
+    std::fprintf(stderr, "render: frames in %s\nrender: contact sheet %s\n", out.c_str(), sheet_path.c_str());
+    if (video) std::fprintf(stderr, "render: video %s\n", opts.video.c_str());
+  }
+  return kOk;
+}
+
+}  // namespace
+
+int render_command(const RenderOptions& opts) {
+  try {
+    return run(opts);
+  } catch (const BadInput& e) {
+    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const LoadError& e) {
+    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const GeometryError& e) {
+    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "grains render: failed: %s\n", e.what());
+    return kRunFailure;
+  }
+}
+
+CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
+  auto* r = app.add_subcommand("render", "render a folder of written frames to PNGs, a contact sheet "
+                                         "and a video, with no window and no GPU");
+  r->add_option("dir", o.dir, "folder of frame_NNNN.ply (or of one sub-folder per object)")->required();
+  r->add_option("--out", o.out, "output folder (default DIR/render)");
+  r->add_option("--graph", o.graph, "graph file: draws its colliders at each frame's time, uses its fps");
+  r->add_option("--color-by", o.color_by,
+                "attribute to colour by: v (speed), id, pscale, strain (edges), any float or int "
+                "attribute, a vector (its magnitude) or NAME.x/.y/.z; the range spans all frames");
+  r->add_option("--video", o.video, "also write a video: FILE.mp4 (needs ffmpeg) or FILE.gif (built in)");
+  r->add_option("--camera", o.camera, "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "
+                                      "(default: frames every grain of every frame)");
+  r->add_option("--size", o.size, "image size WxH (default 960x540)");
+  r->add_option("--fps", o.fps, "frames per second for times and the video (default: the graph's, else 24)")
+      ->check(CLI::PositiveNumber);
+  r->add_option("--supersample", o.supersample, "samples per pixel along each axis (default 2)")
+      ->check(CLI::Range(1, 4));
+  r->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  r->add_option("--sheet-frames", o.sheet_frames, "frames on the contact sheet (default 12)")
+      ->check(CLI::Range(1, 64));
+  r->add_flag("--quiet", o.quiet, "print nothing but errors");
+  return r;
+}
+
+}  // namespace grains::viewer

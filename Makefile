@@ -16,7 +16,8 @@ build: configure
 
 demo: build
 	$(GRAINS) run graphs/default.json --out out/demo
-	@echo "demo: frames and stats.csv are in out/demo"
+	$(GRAINS) render out/demo --graph graphs/default.json
+	@echo "demo: frames and stats.csv are in out/demo; pictures in out/demo/render, contact sheet out/demo/render/contact_sheet.png"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

@@ -156,6 +156,12 @@ void draw_edge(Image& img, const Camera& cam, Vec3 a, Vec3 b, float ra, float rb
 
 }  // namespace
 
+void draw_caption(Image& img, const std::string& text) {
+  int s = img.height >= 400 ? 2 : 1;
+  img.fill_rect(0, 0, text_width(text, s) + 8 * s, text_height(s) + 8 * s, Rgb{1, 1, 1}, 0.55f);
+  draw_text(img, 4 * s, 4 * s, text, Rgb{0.1f, 0.1f, 0.1f}, s);
+}
+
 Image render_frame(const ParticleStore& pts, const Camera& cam, const RenderSettings& settings,
                    const std::vector<ColliderState>& colliders) {
   return render_frame(std::vector<const ParticleStore*>{&pts}, cam, settings, colliders);
@@ -318,13 +324,24 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
   const Vec3 key = normalized(Vec3{-0.45f, 0.75f, -0.5f});
   const Vec3 fill = normalized(Vec3{0.7f, 0.1f, -0.45f});
   const Rgb bg_top{0.90f, 0.90f, 0.91f}, bg_bottom{0.70f, 0.705f, 0.72f};
-  const Rgb ground{0.76f, 0.75f, 0.72f}, grid{0.55f, 0.55f, 0.54f};
+  const Rgb ground{0.80f, 0.79f, 0.76f}, grid{0.60f, 0.60f, 0.59f};
   const Rgb solid_color{0.52f, 0.62f, 0.78f};
   const bool shade = settings.shading;
-  // screen-space occlusion: neighbours nearer than this pixel, within two grain radii in depth
+  // screen-space ambient occlusion (normal-oriented, in the manner of Alchemy AO): samples
+  // within two grain radii that rise above the surface's tangent plane darken it; each pixel
+  // of a 4x4 block turns the sample pattern differently, and the box filter smooths the rest
   const float ao_range = 2.0f * mean_radius;
-  static const float kAoDir[8][2] = {{1, 0},       {0.707f, 0.707f},  {0, 1},  {-0.707f, 0.707f},
-                                     {-1, 0},      {-0.707f, -0.707f}, {0, -1}, {0.707f, -0.707f}};
+  float ao_dir[16][8][3];  // (pattern, sample) → unit offset x, y and radius fraction
+  for (int j = 0; j < 16; ++j)
+    for (int k = 0; k < 8; ++k) {
+      float ang = static_cast<float>(M_PI) * (k / 4.0f + j / 32.0f);
+      ao_dir[j][k][0] = std::cos(ang);
+      ao_dir[j][k][1] = std::sin(ang);
+      ao_dir[j][k][2] = 0.15f + 0.85f * (((k * 5 + j) % 8) + 0.5f) / 8.0f;
+    }
+  static const int kBayer4[4][4] = {{0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
+  std::vector<const GroundPatch*> patch_of(colliders.size(), nullptr);
+  for (const GroundPatch& g : patches) patch_of[g.k] = &g;
 
   Image hi(W, H);
   hi.depth = zbuf;
@@ -336,32 +353,41 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
       const float z = zbuf[p];
       const int32_t id = ibuf[p];
       Rgb out = mix(bg_top, bg_bottom, (y + 0.5f) / H);
+      const Vec3 pos = d * z;  // camera space
+      Vec3 nrm{0, 0, -1};
+      if (id >= 0) {
+        nrm = (pos - splats[id].c) / splats[id].r;
+      } else if (id <= -2) {
+        nrm = patch_of[-2 - id]->n_c;
+        if (dot(nrm, d) > 0) nrm = -nrm;
+      }
 
       float ao = 1;
       if (shade && id != kNone && ao_range > 0) {
-        float rpx = std::clamp(c.focal * ao_range / z, 1.0f, 24.0f * ss);
+        const float rpx = std::clamp(c.focal * ao_range / z, 1.0f, 24.0f * ss);
+        const auto& pat = ao_dir[kBayer4[y & 3][x & 3]];
         float occ = 0;
         for (int k = 0; k < 8; ++k) {
-          float rr = (k & 1) ? rpx : 0.5f * rpx;  // two rings
-          int sx = std::clamp(x + static_cast<int>(std::lround(kAoDir[k][0] * rr)), 0, W - 1);
-          int sy = std::clamp(y + static_cast<int>(std::lround(kAoDir[k][1] * rr)), 0, H - 1);
+          float rr = rpx * pat[k][2];
+          int sx = std::clamp(x + static_cast<int>(std::lround(pat[k][0] * rr)), 0, W - 1);
+          int sy = std::clamp(y + static_cast<int>(std::lround(pat[k][1] * rr)), 0, H - 1);
           size_t q = static_cast<size_t>(sy) * W + sx;
-          if (ibuf[q] == id && id >= 0) continue;  // a sphere does not occlude itself
-          float dz = z - zbuf[q];
-          if (dz > 0.02f * ao_range && dz < 3 * ao_range) occ += std::min(1.0f, dz / ao_range);
+          if (ibuf[q] == id || ibuf[q] == kNone) continue;  // convex: no self-occlusion
+          Vec3 v = Vec3{col_a[sx], row_b[sy], 1} * zbuf[q] - pos;
+          float dist2 = dot(v, v);
+          float fall = 1 - dist2 / (4 * ao_range * ao_range);
+          if (fall <= 0) continue;
+          occ += std::max(0.0f, dot(nrm, v) / std::sqrt(dist2 + 1e-12f) - 0.1f) * fall;
         }
-        ao = std::clamp(1 - 0.6f * occ / 8, 0.3f, 1.0f);
+        ao = std::clamp(1 - 1.4f * occ / 8, 0.25f, 1.0f);
       }
 
       if (id >= 0) {
-        const Splat& s = splats[id];
         const Rgb& alb = albedo[id];
         if (!shade) {
           out = alb;
         } else {
-          Vec3 hit = d * z;
-          Vec3 nrm = (hit - s.c) / s.r;
-          Vec3 v = normalized(-hit);
+          Vec3 v = normalized(-pos);
           float ndl = std::max(0.0f, dot(nrm, key));
           float ndf = std::max(0.0f, dot(nrm, fill));
           float ndv = std::max(0.0f, dot(nrm, v));
@@ -373,13 +399,11 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
         }
       } else if (id <= -2) {
         const int k = -2 - id;
-        const GroundPatch* g = nullptr;
-        for (const GroundPatch& gp : patches)
-          if (gp.k == k) g = &gp;
+        const GroundPatch* g = patch_of[k];
         const ColliderState& col = colliders[k];
         Vec3 l = col.pose.inverse(c.to_world(d * z));
         // grid lines, anti-aliased by the pixel's footprint on the plane
-        Vec3 n = g->n_c;
+        Vec3 n = nrm;
         float facing = std::fabs(dot(normalized(d), n));
         float foot = z * length(d) / c.focal / std::max(0.15f, facing) / col.pose.s;
         float u = (l.x - g->cx) / g->spacing, w = (l.z - g->cz) / g->spacing;
@@ -387,10 +411,9 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
         float line_w = 0.04f * g->spacing;
         float ink = std::max(1 - smoothstep(line_w, line_w + foot, du), 1 - smoothstep(line_w, line_w + foot, dw));
         ink *= std::clamp(1.5f * g->spacing / std::max(foot, 1e-9f) / 8, 0.0f, 1.0f);  // fade dense grids
-        Rgb base = mix(ground, grid, 0.8f * ink);
+        Rgb base = mix(ground, grid, 0.7f * ink);
         if (shade) {
-          if (dot(n, d) > 0) n = -n;
-          float light = 0.55f + 0.45f * std::max(0.0f, dot(n, key));
+          float light = 0.7f + 0.3f * std::max(0.0f, dot(n, key));
           base = base * (light * ao);
         }
         // fade into the background over the patch's outer 15%
@@ -463,11 +486,7 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
       }
     }
   }
-  if (!settings.caption.empty()) {
-    int s = img.height >= 400 ? 2 : 1;
-    img.fill_rect(0, 0, text_width(settings.caption, s) + 8 * s, text_height(s) + 8 * s, Rgb{1, 1, 1}, 0.55f);
-    draw_text(img, 4 * s, 4 * s, settings.caption, Rgb{0.1f, 0.1f, 0.1f}, s);
-  }
+  if (!settings.caption.empty()) draw_caption(img, settings.caption);
   if (by_attr && settings.color_bar) draw_color_bar(img, settings.color_by);
   return img;
 }

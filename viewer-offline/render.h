@@ -131,6 +131,9 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
 Image render_frame(const ParticleStore& pts, const Camera& cam, const RenderSettings& settings,
                    const std::vector<ColliderState>& colliders = {});
 
+// Draws a one-line caption on a light panel in the top-left corner.
+void draw_caption(Image& img, const std::string& text);
+
 // ---- contact sheet ---------------------------------------------------------------------------
 
 // Thumbnails are frames shrunk 4x, `columns` per row (at most 4), `gap` pixels apart and around.
@@ -160,6 +163,7 @@ struct RenderOptions {
   int supersample = 2;
   int threads = 0;          // 0: OpenMP's default
   int sheet_frames = 12;    // thumbnails on the contact sheet
+  bool flat = false;        // flat colours: no lighting or occlusion
   bool quiet = false;
 };
 

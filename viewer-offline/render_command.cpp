@@ -189,6 +189,38 @@ struct Survey {
   std::vector<std::string> point_attribs, edge_attribs;  // of the first frame, for messages
 };
 
+// The grains' box for framing: P +- pscale, except that with many grains a stray few (0.1% on
+// each side of each axis) do not count, so one grain flung far away does not shrink the picture.
+Bounds framing_bounds(const ParticleStore& o) {
+  Bounds b;
+  const float* P = o.v3_if("P");
+  const float* ps = o.f_if("pscale");
+  const size_t n = o.size();
+  if (n < 1000) {
+    for (size_t i = 0; i < n; ++i) b.add(load3(P, i), ps ? ps[i] : 0);
+    return b;
+  }
+  float rmax = 0;
+  for (size_t i = 0; ps && i < n; ++i)
+    if (std::isfinite(ps[i])) rmax = std::max(rmax, ps[i]);
+  const size_t cut = n / 1000;
+  std::vector<float> v;
+  Vec3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    v.clear();
+    for (size_t i = 0; i < n; ++i)
+      if (std::isfinite(P[3 * i + a])) v.push_back(P[3 * i + a]);
+    if (v.size() <= 2 * cut) return b;
+    std::nth_element(v.begin(), v.begin() + cut, v.end());
+    lo[a] = v[cut] - rmax;
+    std::nth_element(v.begin(), v.end() - 1 - cut, v.end());
+    hi[a] = v[v.size() - 1 - cut] + rmax;
+  }
+  b.add(lo);
+  b.add(hi);
+  return b;
+}
+
 std::vector<ParticleStore> read_objects(const FrameFiles& f) {
   std::vector<ParticleStore> out;
   for (const auto& p : f.paths)
@@ -223,9 +255,7 @@ Survey survey(const std::vector<FrameFiles>& frames, const std::string& color_by
       size_t points = 0;
       for (const ParticleStore& o : objs) {
         points += o.size();
-        const float* P = o.v3_if("P");
-        const float* ps = o.f_if("pscale");
-        for (size_t i = 0; i < o.size(); ++i) mine.bounds.add(load3(P, i), ps ? ps[i] : 0);
+        mine.bounds.add(framing_bounds(o));
         if (color_by.empty()) continue;
         if (attribute_values(o, color_by, values) == AttribDomain::None) continue;
         mine.found = true;
@@ -372,6 +402,7 @@ int run(const RenderOptions& opts) {
 
   RenderSettings settings;
   settings.supersample = opts.supersample;
+  settings.shading = !opts.flat;
   settings.scene = sv.bounds;
   if (!opts.color_by.empty()) {
     settings.color_by.attribute = opts.color_by;
@@ -412,8 +443,14 @@ int run(const RenderOptions& opts) {
     const double st = f.number / fps;
     char caption[96];
     std::snprintf(caption, sizeof caption, "frame %d  t %.3f s  %zu grains", f.number, st, points);
-    settings.caption = caption;
     Image img = render_frame(ptrs, cam, settings, colliders.at(st));
+    // thumbnails without the caption: the sheet labels them with their frame number
+    if (next_pick < picks.size() && picks[next_pick] == static_cast<int>(k)) {
+      thumbs.push_back(resize(img, layout.thumb_width, layout.thumb_height));
+      thumb_numbers.push_back(f.number);
+      ++next_pick;
+    }
+    draw_caption(img, caption);
     render_ms += ms_since(t0);
 
     t0 = clock::now();
@@ -422,11 +459,6 @@ int run(const RenderOptions& opts) {
     write_png((fs::path(out) / name).string(), img);
     if (video) video->add(img);
     write_ms += ms_since(t0);
-    if (next_pick < picks.size() && picks[next_pick] == static_cast<int>(k)) {
-      thumbs.push_back(resize(img, layout.thumb_width, layout.thumb_height));
-      thumb_numbers.push_back(f.number);
-      ++next_pick;
-    }
     if (!opts.quiet && isatty(fileno(stderr)))
       std::fprintf(stderr, "\rrender: frame %d (%zu/%zu)   ", f.number, k + 1, frames.size());
   }
@@ -491,6 +523,7 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
   r->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
   r->add_option("--sheet-frames", o.sheet_frames, "frames on the contact sheet (default 12)")
       ->check(CLI::Range(1, 64));
+  r->add_flag("--flat", o.flat, "flat colours (exactly the colour bar's), no lighting or occlusion");
   r->add_flag("--quiet", o.quiet, "print nothing but errors");
   return r;
 }

@@ -1,0 +1,604 @@
+// The offline viewer: projection, z-buffered spheres, colour-by and its bar, edges, colliders,
+// the contact sheet, the render command's files and exit codes, the GIF writer.
+#include <omp.h>
+#include <sys/wait.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "engine/geometry_io.h"
+#include "tests/support/support.h"
+#include "viewer-offline/gif.h"
+#include "viewer-offline/render.h"
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#define STB_IMAGE_STATIC
+#define STB_IMAGE_IMPLEMENTATION
+#include <stb_image.h>
+#pragma GCC diagnostic pop
+
+using namespace grains;
+using namespace grains::viewer;
+
+namespace {
+
+// A store of spheres at `centres` with radius `r` and a float attribute `tag`.
+ParticleStore spheres(const std::vector<Vec3>& centres, const std::vector<float>& radii,
+                      const std::vector<float>& tags = {}) {
+  ParticleStore pts;
+  pts.add_points(centres.size());
+  float* P = pts.v3("P");
+  float* ps = pts.f("pscale");
+  float* tag = pts.f("tag");
+  for (size_t i = 0; i < centres.size(); ++i) {
+    store3(P, i, centres[i]);
+    ps[i] = radii[i];
+    tag[i] = i < tags.size() ? tags[i] : 0.0f;
+  }
+  return pts;
+}
+
+// Flat colours at one sample per pixel: a pixel shows exactly its surface's albedo.
+RenderSettings flat(const std::string& color_by = "", float lo = 0, float hi = 1) {
+  RenderSettings s;
+  s.shading = false;
+  s.supersample = 1;
+  s.grain_variation = false;
+  s.color_bar = false;
+  s.color_by.attribute = color_by;
+  s.color_by.min = lo;
+  s.color_by.max = hi;
+  return s;
+}
+
+struct Px {
+  int r, g, b;
+  bool operator==(const Px& o) const { return r == o.r && g == o.g && b == o.b; }
+};
+Px pixel(const Image& img, int x, int y) {
+  const uint8_t* p = img.px(x, y);
+  return {p[0], p[1], p[2]};
+}
+Px bytes(const Rgb& c) { return {to_byte(c.r), to_byte(c.g), to_byte(c.b)}; }
+std::ostream& operator<<(std::ostream& os, const Px& p) {
+  return os << "(" << p.r << "," << p.g << "," << p.b << ")";
+}
+
+// The pinhole projection worked out here, independently of Camera: returns pixel coordinates
+// (pixel (i, j)'s centre at (i + 0.5, j + 0.5), j down) and the focal length in pixels.
+void pinhole(Vec3 eye, Vec3 target, float fov_deg, int w, int h, Vec3 p, float* px, float* py,
+             float* focal) {
+  Vec3 f = normalized(target - eye);
+  Vec3 r = normalized(cross(f, Vec3{0, 1, 0}));
+  Vec3 u = cross(r, f);
+  *focal = 0.5f * h / std::tan(0.5f * fov_deg * static_cast<float>(M_PI) / 180.0f);
+  Vec3 d = p - eye;
+  float z = dot(d, f);
+  *px = 0.5f * w + *focal * dot(d, r) / z;
+  *py = 0.5f * h - *focal * dot(d, u) / z;
+}
+
+bool png_size(const std::string& path, int* w, int* h) {
+  int n = 0;
+  return stbi_info(path.c_str(), w, h, &n) == 1;
+}
+
+}  // namespace
+
+TEST_CASE("a single sphere lands at its pinhole projection with its projected radius", "[viewer]") {
+  const Vec3 eye{0.4f, 0.6f, 3.0f}, target{0, 0, 0};
+  const int W = 200, H = 150;
+  const float fov = 40;
+  const Vec3 c{0.25f, 0.1f, -0.1f};
+  const float r = 0.15f;
+  Camera cam = Camera::look_at(eye, target, fov, W, H);
+  Image img = render_frame(spheres({c}, {r}), cam, flat());
+
+  float ex, ey, f;
+  pinhole(eye, target, fov, W, H, c, &ex, &ey, &f);
+  // the disc is the set of pixels with a finite depth; its centroid and equivalent radius
+  double sx = 0, sy = 0, n = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      if (std::isfinite(img.depth[static_cast<size_t>(y) * W + x])) {
+        sx += x + 0.5;
+        sy += y + 0.5;
+        n += 1;
+      }
+  REQUIRE(n > 0);
+  CHECK(std::fabs(sx / n - ex) < 1.0);
+  CHECK(std::fabs(sy / n - ey) < 1.0);
+  // a sphere at distance d subtends a cone of half-angle asin(r / d): its image is a disc (to
+  // first order off the axis) of radius f * tan(asin(r / d)) = f r / sqrt(d^2 - r^2)
+  float d = length(c - eye);
+  double expected_radius = f * r / std::sqrt(d * d - r * r);
+  double measured_radius = std::sqrt(n / M_PI);
+  CHECK(std::fabs(measured_radius - expected_radius) < 1.0);
+  // and the row through the centre is as wide as the disc
+  int row = static_cast<int>(ey), left = W, right = -1;
+  for (int x = 0; x < W; ++x)
+    if (std::isfinite(img.depth[static_cast<size_t>(row) * W + x])) {
+      left = std::min(left, x);
+      right = std::max(right, x);
+    }
+  CHECK(std::fabs((right - left + 1) / 2.0 - expected_radius) < 1.0);
+  // Camera::project agrees with the independent projection
+  float px, py, depth;
+  REQUIRE(cam.project(c, &px, &py, &depth));
+  CHECK(px == Approx(ex).margin(1e-3));
+  CHECK(py == Approx(ey).margin(1e-3));
+  // the depth at the disc's centre is the sphere's front surface, about d - r
+  CHECK(img.depth[static_cast<size_t>(ey) * W + static_cast<size_t>(ex)] ==
+        Approx(dot(c - eye, cam.forward) - r).margin(0.01));
+}
+
+TEST_CASE("nearer spheres hide farther ones, per pixel", "[viewer]") {
+  const Vec3 eye{0, 0, 5}, target{0, 0, 0};
+  const int W = 160, H = 120;
+  Camera cam = Camera::look_at(eye, target, 30, W, H);
+  const Px near_colour = bytes(colormap(0)), far_colour = bytes(colormap(1));
+
+  SECTION("separate spheres: the nearer one covers the overlap, whatever the order") {
+    for (bool near_first : {true, false}) {
+      std::vector<Vec3> c = {{0, 0, 1}, {0.15f, 0, -1}};
+      std::vector<float> tag = {0, 1};
+      if (!near_first) {
+        std::swap(c[0], c[1]);
+        std::swap(tag[0], tag[1]);
+      }
+      Image img = render_frame(spheres(c, {0.3f, 0.3f}, tag), cam, flat("tag"));
+      float px, py;
+      cam.project({0.05f, 0, 1.3f}, &px, &py, nullptr);  // inside both discs
+      CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == near_colour);
+    }
+  }
+  SECTION("intersecting spheres: each pixel shows the surface nearest the eye") {
+    // big (tag 1) at the origin, small (tag 0) at (0.4, 0, 0.15): the small centre is nearer, so
+    // a painter's sort would draw the small one over the big one everywhere; but at x = 0.25 the
+    // big surface (z = sqrt(0.5^2 - 0.25^2) = 0.433) is nearer than the small one (z = 0.15 +
+    // sqrt(0.2^2 - 0.15^2) = 0.282), and at x = 0.45 the small one (z = 0.344) beats the big (0.218)
+    Image img = render_frame(spheres({{0, 0, 0}, {0.4f, 0, 0.15f}}, {0.5f, 0.2f}, {1, 0}), cam, flat("tag"));
+    float px, py;
+    cam.project({0.25f, 0, 0.433f}, &px, &py, nullptr);
+    CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == far_colour);
+    cam.project({0.45f, 0, 0.344f}, &px, &py, nullptr);
+    CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == near_colour);
+  }
+}
+
+TEST_CASE("colour-by maps the minimum and maximum onto the colour bar's ends", "[viewer]") {
+  const int W = 240, H = 160;
+  Camera cam = Camera::look_at({0, 0, 5}, {0, 0, 0}, 30, W, H);
+  std::vector<Vec3> c = {{-0.8f, 0, 0}, {0, 0, 0}, {0.6f, 0, 0}};
+  RenderSettings s = flat("tag", -2, 5);
+  s.color_bar = true;
+  Image img = render_frame(spheres(c, {0.15f, 0.15f, 0.15f}, {-2, 1, 5}), cam, s);
+  Rect bar = color_bar_rect(W, H);
+  REQUIRE(bar.x1 <= W);
+  REQUIRE(bar.y1 <= H);
+  int bx = (bar.x0 + bar.x1) / 2;
+  Px bottom = pixel(img, bx, bar.y1 - 1), top = pixel(img, bx, bar.y0);
+  CHECK(bottom == bytes(colormap(0)));
+  CHECK(top == bytes(colormap(1)));
+  float px, py;
+  cam.project(c[0], &px, &py, nullptr);
+  CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == bottom);
+  cam.project(c[2], &px, &py, nullptr);
+  CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == top);
+  cam.project(c[1], &px, &py, nullptr);  // 1 is 3/7 of the way up
+  CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == bytes(colormap(3.0f / 7.0f)));
+
+  SECTION("vectors colour by magnitude, components by NAME.x, edges by their attributes") {
+    ParticleStore p = spheres(c, {0.1f, 0.1f, 0.1f});
+    store3(p.v3("v"), 0, {3, 4, 0});
+    std::vector<float> vals;
+    REQUIRE(attribute_values(p, "v", vals) == AttribDomain::Point);
+    CHECK(vals[0] == Approx(5));
+    REQUIRE(attribute_values(p, "v.y", vals) == AttribDomain::Point);
+    CHECK(vals[0] == Approx(4));
+    REQUIRE(attribute_values(p, "id", vals) == AttribDomain::Point);
+    CHECK(vals[2] == Approx(2));
+    p.add_prim(0, 1);
+    p.prim_f("strain")[0] = 0.25f;
+    REQUIRE(attribute_values(p, "strain", vals) == AttribDomain::Edge);
+    CHECK(vals[0] == Approx(0.25));
+    CHECK(attribute_values(p, "nothing", vals) == AttribDomain::None);
+    CHECK(format_value(-0.000123) == "-0.000123");
+    CHECK(format_value(1.5e7) == "1.5e+07");
+  }
+}
+
+TEST_CASE("edges are drawn as depth-tested lines", "[viewer]") {
+  const int W = 160, H = 121;  // odd: the line y = 0 runs through the centres of row 60
+  Camera cam = Camera::look_at({0, 0, 5}, {0, 0, 0}, 30, W, H);
+  RenderSettings s = flat();
+  s.edge_color = {1, 0, 0};
+  // two small grains 1 m apart joined by an edge, and a big grain in front of part of it
+  ParticleStore p = spheres({{-0.5f, 0, 0}, {0.5f, 0, 0}, {0.35f, 0, 1.5f}}, {0.05f, 0.05f, 0.12f});
+  p.add_prim(0, 1);
+  Image img = render_frame(p, cam, s);
+  Image bare = render_frame(spheres({{-0.5f, 0, 0}, {0.5f, 0, 0}, {0.35f, 0, 1.5f}}, {0.05f, 0.05f, 0.12f}), cam, s);
+  float px, py;
+  cam.project({-0.1f, 0, 0}, &px, &py, nullptr);  // on the line, in the open
+  Px on_line = pixel(img, static_cast<int>(px), static_cast<int>(py));
+  CHECK(on_line.r > 200);
+  CHECK(on_line.g < 60);
+  CHECK_FALSE(on_line == pixel(bare, static_cast<int>(px), static_cast<int>(py)));
+  // behind the big grain the line is hidden
+  cam.project({0.35f, 0, 1.5f}, &px, &py, nullptr);
+  CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) ==
+        pixel(bare, static_cast<int>(px), static_cast<int>(py)));
+}
+
+TEST_CASE("colliders are drawn and depth-tested against grains", "[viewer]") {
+  const int W = 160, H = 120;
+  Camera cam = Camera::look_at({0, 1, 5}, {0, 0, 0}, 35, W, H);
+  ColliderState ground;  // plane y = 0
+  ColliderState ball;
+  ball.shape.kind = ShapeKind::Sphere;
+  ball.shape.radius = 0.4f;
+  ball.pose.t = {-0.6f, 0.4f, 0};
+  ColliderState torus;
+  torus.shape.kind = ShapeKind::Torus;
+  torus.shape.radius = 0.3f;
+  torus.shape.tube = 0.08f;
+  torus.pose = Pose::from_trs({0.6f, 0.3f, 0}, {90, 0, 0}, 1);
+  RenderSettings s = flat();
+  s.sand = {1, 0, 1};
+  // a grain in front of the ball
+  ParticleStore p = spheres({{-0.6f, 0.4f, 1.0f}}, {0.1f});
+  Image none = render_frame(p, cam, s);
+  Image img = render_frame(p, cam, s, {ground, ball, torus});
+  float px, py;
+  // the ball's centre direction, beside the grain: the ball's colour, not background
+  cam.project({-0.6f, 0.6f, 0.39f}, &px, &py, nullptr);
+  CHECK_FALSE(pixel(img, static_cast<int>(px), static_cast<int>(py)) ==
+              pixel(none, static_cast<int>(px), static_cast<int>(py)));
+  // the grain in front of the ball keeps its own colour
+  cam.project({-0.6f, 0.4f, 1.0f}, &px, &py, nullptr);
+  CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == bytes(s.sand));
+  // the torus's tube (ring in the xy plane after the 90 degree turn), and its empty middle
+  cam.project({0.6f + 0.3f, 0.3f, 0.08f}, &px, &py, nullptr);
+  CHECK_FALSE(pixel(img, static_cast<int>(px), static_cast<int>(py)) ==
+              pixel(none, static_cast<int>(px), static_cast<int>(py)));
+  // the ground in front of everything, below the objects
+  cam.project({0, 0, 1.5f}, &px, &py, nullptr);
+  CHECK_FALSE(pixel(img, static_cast<int>(px), static_cast<int>(py)) ==
+              pixel(none, static_cast<int>(px), static_cast<int>(py)));
+  CHECK(std::isfinite(img.depth[static_cast<size_t>(py) * W + static_cast<size_t>(px)]));
+}
+
+TEST_CASE("the image does not depend on the thread count", "[viewer]") {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-0.5f, 0.5f);
+  std::vector<Vec3> c;
+  std::vector<float> r;
+  for (int i = 0; i < 3000; ++i) {
+    c.push_back({u(rng), u(rng), u(rng)});
+    r.push_back(0.02f + 0.02f * (u(rng) + 0.5f));
+  }
+  ParticleStore p = spheres(c, r);
+  Camera cam = frame_bounds(Bounds{{-0.5f, -0.5f, -0.5f}, {0.5f, 0.5f, 0.5f}}, 160, 90);
+  RenderSettings s;
+  ColliderState ground;
+  ground.pose.t = {0, -0.5f, 0};
+  int before = omp_get_max_threads();
+  omp_set_num_threads(1);
+  Image one = render_frame(p, cam, s, {ground});
+  omp_set_num_threads(3);
+  Image three = render_frame(p, cam, s, {ground});
+  omp_set_num_threads(before);
+  CHECK(one.rgb == three.rgb);
+}
+
+TEST_CASE("the default camera frames the bounds", "[viewer]") {
+  Bounds b;
+  b.add({-1, 0, -0.5f});
+  b.add({2, 0.5f, 0.5f});
+  const int W = 320, H = 180;
+  Camera cam = frame_bounds(b, W, H);
+  for (int k = 0; k < 8; ++k) {
+    Vec3 p{(k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y, (k & 4) ? b.hi.z : b.lo.z};
+    float px, py;
+    REQUIRE(cam.project(p, &px, &py, nullptr));
+    CHECK(px >= 0);
+    CHECK(px <= W);
+    CHECK(py >= 0);
+    CHECK(py <= H);
+  }
+  // looking down on it from a three-quarter view
+  CHECK(cam.eye.y > b.hi.y);
+  CHECK(cam.eye.x > b.center().x);
+  CHECK(cam.eye.z > b.center().z);
+}
+
+TEST_CASE("contact sheet layout and picks", "[viewer]") {
+  ContactSheetLayout l = contact_sheet_layout(12, 960, 540);
+  CHECK(l.columns == 4);
+  CHECK(l.rows == 3);
+  CHECK(l.width == 4 * 240 + 5 * 4);
+  CHECK(l.height == 3 * 135 + 4 * 4);
+  CHECK(contact_sheet_picks(5) == std::vector<int>{0, 1, 2, 3, 4});
+  std::vector<int> picks = contact_sheet_picks(96);
+  REQUIRE(picks.size() == 12);
+  CHECK(picks.front() == 0);
+  CHECK(picks.back() == 95);
+  for (size_t k = 1; k < picks.size(); ++k) CHECK(picks[k] > picks[k - 1]);
+}
+
+namespace {
+// Writes frames 1 and 2 of a small scene: a sphere whose `heat` is 0 then 10, with an edge.
+std::string two_frames() {
+  std::string dir = test::temp_dir("render");
+  for (int f = 1; f <= 2; ++f) {
+    ParticleStore p = spheres({{0, 0.3f, 0}, {0.4f, 0.3f, 0}}, {0.1f, 0.1f});
+    p.f("heat")[0] = f == 1 ? 0.0f : 10.0f;
+    p.f("heat")[1] = 5;
+    p.add_prim(0, 1);
+    char name[32];
+    std::snprintf(name, sizeof name, "/frame_%04d.ply", f);
+    write_ply(dir + name, p, {"heat"});
+  }
+  return dir;
+}
+}  // namespace
+
+TEST_CASE("render command: a folder of 2 frames gives 2 PNGs and a contact sheet", "[viewer]") {
+  std::string dir = two_frames();
+  RenderOptions o;
+  o.dir = dir;
+  o.size = "96x64";
+  o.quiet = true;
+  o.color_by = "heat";
+  o.flat = true;
+  o.supersample = 1;
+  o.camera = "0.2,0.3,3,0.2,0.3,0,30";  // the hot grain sits left of the colour bar's panel
+  REQUIRE(render_command(o) == 0);
+  int w = 0, h = 0;
+  REQUIRE(png_size(dir + "/render/frame_0001.png", &w, &h));
+  CHECK(w == 96);
+  CHECK(h == 64);
+  REQUIRE(png_size(dir + "/render/frame_0002.png", &w, &h));
+  CHECK_FALSE(std::filesystem::exists(dir + "/render/frame_0003.png"));
+  ContactSheetLayout l = contact_sheet_layout(2, 96, 64);
+  REQUIRE(png_size(dir + "/render/contact_sheet.png", &w, &h));
+  CHECK(w == l.width);
+  CHECK(h == l.height);
+  CHECK(w == 2 * 24 + 3 * 4);  // two thumbnails of 96/4 x 64/4 with 4-pixel gaps
+  CHECK(h == 16 + 2 * 4);
+
+  SECTION("the colour range spans all frames: frame 1 shows the minimum, frame 2 the maximum") {
+    Camera cam = Camera::look_at({0.2f, 0.3f, 3}, {0.2f, 0.3f, 0}, 30, 96, 64);
+    float px, py;
+    cam.project({0, 0.3f, 0.1f}, &px, &py, nullptr);
+    Rect bar = color_bar_rect(96, 64);
+    for (int f = 1; f <= 2; ++f) {
+      int iw, ih, n;
+      std::string path = dir + "/render/frame_000" + std::to_string(f) + ".png";
+      unsigned char* data = stbi_load(path.c_str(), &iw, &ih, &n, 3);
+      REQUIRE(data);
+      auto at = [&](int x, int y) {
+        const unsigned char* q = data + 3 * (y * iw + x);
+        return Px{q[0], q[1], q[2]};
+      };
+      Px grain = at(static_cast<int>(px), static_cast<int>(py));
+      Px end = at((bar.x0 + bar.x1) / 2, f == 1 ? bar.y1 - 1 : bar.y0);
+      CHECK(grain == end);
+      stbi_image_free(data);
+    }
+  }
+}
+
+TEST_CASE("render command: colliders from a graph, the grains binary, exit codes", "[viewer]") {
+  std::string dir = two_frames();
+  std::string graph = test::write_file(dir, "g.json", R"({
+    "grains_graph": 1, "name": "r", "fps": 24, "frames": 2,
+    "nodes": [
+      {"name": "src", "type": "source", "params": {"shape": "box", "size": [0.1, 0.1, 0.1]}},
+      {"name": "ground", "type": "collider", "params": {"shape": "plane"}},
+      {"name": "ball", "type": "collider", "params": {"shape": "sphere", "radius": 0.2, "translate": [0, "0.2 + $ST", 0]}},
+      {"name": "box", "type": "collider", "params": {"shape": "box", "size": [0.2, 0.1, 0.3], "translate": [0.5, 0, 0]}},
+      {"name": "ring", "type": "collider", "params": {"shape": "torus", "radius": 0.3, "tube": 0.05}},
+      {"name": "pill", "type": "collider", "params": {"shape": "capsule", "radius": 0.05, "height": 0.3, "translate": [-0.4, 0.2, 0]}},
+      {"name": "solver", "type": "solver", "inputs": ["src"], "params": {"colliders": ["ground", "ball", "box", "ring", "pill"]}}
+    ]})");
+  std::string log = dir + "/log.txt";
+  std::string out = dir + "/pictures";
+  CHECK(test::run_grains("render " + dir + " --graph " + graph + " --out " + out +
+                             " --size 96x64 --color-by strain --video " + dir + "/a.gif",
+                         log) == 0);
+  INFO(test::read_text(log));
+  CHECK(std::filesystem::exists(out + "/frame_0001.png"));
+  CHECK(std::filesystem::exists(out + "/frame_0002.png"));
+  CHECK(std::filesystem::exists(out + "/contact_sheet.png"));
+  CHECK(std::filesystem::exists(dir + "/a.gif"));
+
+  SECTION("bad input exits 2 with a message") {
+    CHECK(test::run_grains("render " + dir + "/missing", log) == 2);
+    CHECK(test::read_text(log).find("not a folder") != std::string::npos);
+    CHECK(test::run_grains("render " + dir + " --size 64by48", log) == 2);
+    CHECK(test::run_grains("render " + dir + " --camera 1,2,3", log) == 2);
+    CHECK(test::run_grains("render " + dir + " --color-by nothing", log) == 2);
+    CHECK(test::read_text(log).find("heat") != std::string::npos);  // lists what there is
+    CHECK(test::run_grains("render " + dir + " --graph " + dir + "/none.json", log) == 2);
+  }
+  SECTION("an mp4 without ffmpeg on PATH exits 2 and says so") {
+    std::string empty = test::temp_dir("nopath");
+    // run the binary itself with a PATH that has no ffmpeg
+    std::string cmd = "PATH=" + empty + " " + std::string(GRAINS_BINARY) + " render " + dir +
+                      " --size 32x24 --video " + dir + "/a.mp4 > " + log + " 2>&1";
+    int rc = std::system(cmd.c_str());
+    CHECK(WEXITSTATUS(rc) == 2);
+    CHECK(test::read_text(log).find("ffmpeg") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir + "/a.mp4"));
+  }
+}
+
+namespace {
+// A GIF decoder just big enough to read back what GifWriter writes: the global palette and each
+// frame's indices.
+struct Gif {
+  int width = 0, height = 0;
+  std::vector<uint8_t> palette;
+  std::vector<std::vector<uint8_t>> frames;
+};
+bool decode_gif(const std::vector<uint8_t>& b, Gif& g) {
+  if (b.size() < 13 || std::string(b.begin(), b.begin() + 6) != "GIF89a") return false;
+  g.width = b[6] | b[7] << 8;
+  g.height = b[8] | b[9] << 8;
+  size_t k = 13;
+  if (b[10] & 0x80) {
+    size_t n = 3u << ((b[10] & 7) + 1);
+    g.palette.assign(b.begin() + k, b.begin() + k + n);
+    k += n;
+  }
+  while (k < b.size()) {
+    uint8_t tag = b[k++];
+    if (tag == 0x3B) return true;
+    if (tag == 0x21) {  // extension: label, sub-blocks
+      ++k;
+      while (b[k]) k += b[k] + 1;
+      ++k;
+      continue;
+    }
+    if (tag != 0x2C) return false;
+    k += 9;
+    int min_size = b[k++];
+    std::vector<uint8_t> data;
+    while (b[k]) {
+      data.insert(data.end(), b.begin() + k + 1, b.begin() + k + 1 + b[k]);
+      k += b[k] + 1;
+    }
+    ++k;
+    // LZW decode
+    const int clear = 1 << min_size, end = clear + 1;
+    std::vector<std::vector<uint8_t>> dict;
+    auto reset = [&] {
+      dict.clear();
+      for (int c = 0; c < clear + 2; ++c) dict.push_back({static_cast<uint8_t>(c)});
+    };
+    reset();
+    int size = min_size + 1, prev = -1;
+    size_t bitpos = 0;
+    std::vector<uint8_t> out;
+    for (;;) {
+      if ((bitpos + size + 7) / 8 > data.size()) return false;
+      int code = 0;
+      for (int i = 0; i < size; ++i, ++bitpos) code |= ((data[bitpos / 8] >> (bitpos % 8)) & 1) << i;
+      if (code == clear) {
+        reset();
+        size = min_size + 1;
+        prev = -1;
+        continue;
+      }
+      if (code == end) break;
+      std::vector<uint8_t> entry;
+      if (code < static_cast<int>(dict.size())) {
+        entry = dict[code];
+        if (prev >= 0) {
+          auto e = dict[prev];
+          e.push_back(entry[0]);
+          dict.push_back(e);
+        }
+      } else {
+        if (prev < 0 || code != static_cast<int>(dict.size())) return false;
+        entry = dict[prev];
+        entry.push_back(entry[0]);
+        dict.push_back(entry);
+      }
+      out.insert(out.end(), entry.begin(), entry.end());
+      prev = code;
+      if (static_cast<int>(dict.size()) == (1 << size) && size < 12) ++size;
+    }
+    g.frames.push_back(out);
+  }
+  return false;
+}
+}  // namespace
+
+TEST_CASE("GIF writer: palette colours round-trip through LZW", "[viewer]") {
+  std::string dir = test::temp_dir("gif");
+  const auto& pal = gif_palette();
+  REQUIRE(pal.size() == 768);
+  // frames of palette colours (noise, so the code table fills and clears many times)
+  std::mt19937 rng(5);
+  std::vector<Image> frames;
+  for (int f = 0; f < 2; ++f) {
+    Image img(150, 97);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        int c = (f == 0) ? static_cast<int>(rng() % 252) : (x / 10 + y / 7) % 252;
+        uint8_t* p = img.px(x, y);
+        p[0] = pal[3 * c];
+        p[1] = pal[3 * c + 1];
+        p[2] = pal[3 * c + 2];
+      }
+    frames.push_back(img);
+  }
+  {
+    GifWriter w(dir + "/t.gif", 150, 97, 4);
+    for (const auto& f : frames) w.add_frame(f);
+  }
+  std::ifstream in(dir + "/t.gif", std::ios::binary);
+  std::vector<uint8_t> bytes_((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  Gif g;
+  REQUIRE(decode_gif(bytes_, g));
+  CHECK(g.width == 150);
+  CHECK(g.height == 97);
+  REQUIRE(g.frames.size() == 2);
+  for (int f = 0; f < 2; ++f) {
+    REQUIRE(g.frames[f].size() == 150u * 97u);
+    bool same = true;
+    for (int y = 0; y < 97; ++y)
+      for (int x = 0; x < 150; ++x) {
+        int i = g.frames[f][y * 150 + x];
+        const uint8_t* p = frames[f].px(x, y);
+        same = same && g.palette[3 * i] == p[0] && g.palette[3 * i + 1] == p[1] && g.palette[3 * i + 2] == p[2];
+      }
+    CHECK(same);
+  }
+}
+
+TEST_CASE("render time for 100,000 grains", "[.][viewer][bench]") {
+  // hidden (run with "[bench]"): a settled-looking pile of 100k grains at 960x540
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> u(0, 1);
+  std::vector<Vec3> c;
+  std::vector<float> r;
+  for (int i = 0; i < 100000; ++i) {
+    float a = u(rng) * 2 * static_cast<float>(M_PI), d = std::sqrt(u(rng));
+    float h = u(rng) * (1 - d) * 0.6f;
+    c.push_back({d * std::cos(a), h, d * std::sin(a)});
+    r.push_back(0.008f);
+  }
+  ParticleStore p = spheres(c, r);
+  Bounds b;
+  for (auto& x : c) b.add(x, 0.008f);
+  Camera cam = frame_bounds(b, 960, 540);
+  ColliderState ground;
+  for (int ss : {1, 2}) {
+    RenderSettings s;
+    s.supersample = ss;
+    s.scene = b;
+    render_frame(p, cam, s, {ground});  // warm up
+    auto t0 = std::chrono::steady_clock::now();
+    const int reps = 3;
+    Image img;
+    for (int k = 0; k < reps; ++k) img = render_frame(p, cam, s, {ground});
+    double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / reps;
+    WARN("100k grains, 960x540, supersample " << ss << ", " << omp_get_max_threads() << " threads: " << ms << " ms");
+    auto t1 = std::chrono::steady_clock::now();
+    write_png(test::temp_dir("bench") + "/f.png", img);
+    double png_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count();
+    WARN("  PNG write: " << png_ms << " ms");
+    CHECK(ms < 1000);
+  }
+}

@@ -7,7 +7,8 @@
 namespace grains::viewer {
 
 void Bounds::add(const Vec3& p, float r) {
-  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(r)) return;
+  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !std::isfinite(r))
+    return;
   r = std::max(r, 0.0f);
   lo = {std::min(lo.x, p.x - r), std::min(lo.y, p.y - r), std::min(lo.z, p.z - r)};
   hi = {std::max(hi.x, p.x + r), std::max(hi.y, p.y + r), std::max(hi.z, p.z + r)};
@@ -102,7 +103,8 @@ Camera frame_bounds(const Bounds& box_in, int width, int height, float fov_deg, 
       ymin = std::min(ymin, y);
       ymax = std::max(ymax, y);
     }
-    target += cam.right * (0.5f * (xmin + xmax) * tan_h * D) + cam.up * (0.5f * (ymin + ymax) * tan_v * D);
+    target += cam.right * (0.5f * (xmin + xmax) * tan_h * D) +
+              cam.up * (0.5f * (ymin + ymax) * tan_v * D);
     cam = Camera::look_at(target + back, target, fov_deg, width, height);
   }
   return Camera::look_at(target + back * fit_distance(target, cam), target, fov_deg, width, height);

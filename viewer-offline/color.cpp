@@ -77,7 +77,9 @@ std::string format_value(double v) {
 }
 
 namespace {
-int text_scale(int height) { return height >= 400 ? 2 : 1; }
+int text_scale(int height) {
+  return height >= 400 ? 2 : 1;
+}
 }  // namespace
 
 Rect color_bar_rect(int width, int height) {

@@ -27,14 +27,16 @@ std::vector<int> contact_sheet_picks(int count, int max_thumbs) {
     return picks;
   }
   for (int k = 0; k < max_thumbs; ++k)
-    picks.push_back(static_cast<int>(std::lround(static_cast<double>(k) * (count - 1) / (max_thumbs - 1))));
+    picks.push_back(
+        static_cast<int>(std::lround(static_cast<double>(k) * (count - 1) / (max_thumbs - 1))));
   return picks;
 }
 
 Image contact_sheet(const std::vector<Image>& frames, const std::vector<int>& frame_numbers,
                     int frame_width, int frame_height) {
   if (frames.empty()) return Image();
-  ContactSheetLayout l = contact_sheet_layout(static_cast<int>(frames.size()), frame_width, frame_height);
+  ContactSheetLayout l =
+      contact_sheet_layout(static_cast<int>(frames.size()), frame_width, frame_height);
   Image sheet(l.width, l.height);
   sheet.fill_rect(0, 0, l.width, l.height, Rgb{0.22f, 0.22f, 0.23f});
   for (size_t k = 0; k < frames.size(); ++k) {
@@ -48,7 +50,8 @@ Image contact_sheet(const std::vector<Image>& frames, const std::vector<int>& fr
     if (k < frame_numbers.size()) {
       std::string label = std::to_string(frame_numbers[k]);
       int s = l.thumb_height >= 100 ? 2 : 1;
-      sheet.fill_rect(x, y, x + text_width(label, s) + 4 * s, y + text_height(s) + 4 * s, Rgb{1, 1, 1}, 0.7f);
+      sheet.fill_rect(x, y, x + text_width(label, s) + 4 * s, y + text_height(s) + 4 * s,
+                      Rgb{1, 1, 1}, 0.7f);
       draw_text(sheet, x + 2 * s, y + 2 * s, label, Rgb{0.1f, 0.1f, 0.1f}, s);
     }
   }

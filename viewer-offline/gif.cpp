@@ -9,7 +9,9 @@ namespace {
 constexpr int kLevelsR = 6, kLevelsG = 7, kLevelsB = 6;  // 252 colours, then 4 greys
 const int kBayer4[4][4] = {{0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
 
-uint8_t level_value(int q, int levels) { return static_cast<uint8_t>((q * 255 + (levels - 1) / 2) / (levels - 1)); }
+uint8_t level_value(int q, int levels) {
+  return static_cast<uint8_t>((q * 255 + (levels - 1) / 2) / (levels - 1));
+}
 
 // quantises one channel with an ordered-dither threshold in [0, 1)
 int dither(uint8_t v, int levels, float threshold) {
@@ -134,7 +136,8 @@ GifWriter::GifWriter(const std::string& path, int width, int height, int delay_c
   const auto& pal = gif_palette();
   h.insert(h.end(), pal.begin(), pal.end());
   // NETSCAPE2.0 application extension: loop forever
-  const uint8_t loop[] = {0x21, 0xFF, 0x0B, 'N', 'E', 'T', 'S', 'C', 'A', 'P', 'E', '2', '.', '0', 0x03, 0x01, 0x00, 0x00, 0x00};
+  const uint8_t loop[] = {0x21, 0xFF, 0x0B, 'N', 'E',  'T',  'S',  'C',  'A', 'P',
+                          'E',  '2',  '.',  '0', 0x03, 0x01, 0x00, 0x00, 0x00};
   h.insert(h.end(), loop, loop + sizeof loop);
   if (std::fwrite(h.data(), 1, h.size(), f_) != h.size()) {
     std::fclose(f_);
@@ -183,7 +186,8 @@ void GifWriter::add_frame(const Image& img) {
     b.insert(b.end(), codes.begin() + k, codes.begin() + k + len);
   }
   b.push_back(0);
-  if (std::fwrite(b.data(), 1, b.size(), f_) != b.size()) throw std::runtime_error(path_ + ": write failed");
+  if (std::fwrite(b.data(), 1, b.size(), f_) != b.size())
+    throw std::runtime_error(path_ + ": write failed");
 }
 
 void GifWriter::close() {

@@ -107,10 +107,12 @@ Image resize(const Image& src, int w, int h) {
       double x0 = x * sx, x1 = (x + 1) * sx;
       double acc[3] = {0, 0, 0}, wsum = 0;
       // each source pixel weighs by its overlap with the destination pixel's footprint
-      for (int j = static_cast<int>(y0); j < std::min(src.height, static_cast<int>(std::ceil(y1))); ++j) {
+      for (int j = static_cast<int>(y0); j < std::min(src.height, static_cast<int>(std::ceil(y1)));
+           ++j) {
         double wy = std::min(y1, j + 1.0) - std::max(y0, static_cast<double>(j));
         if (wy <= 0) continue;
-        for (int i = static_cast<int>(x0); i < std::min(src.width, static_cast<int>(std::ceil(x1))); ++i) {
+        for (int i = static_cast<int>(x0); i < std::min(src.width, static_cast<int>(std::ceil(x1)));
+             ++i) {
           double wx = std::min(x1, i + 1.0) - std::max(x0, static_cast<double>(i));
           if (wx <= 0) continue;
           const uint8_t* p = src.px(i, j);

@@ -11,9 +11,15 @@ namespace grains::viewer {
 struct Rgb {
   float r = 0, g = 0, b = 0;
 };
-inline Rgb operator*(const Rgb& c, float s) { return {c.r * s, c.g * s, c.b * s}; }
-inline Rgb operator+(const Rgb& a, const Rgb& b) { return {a.r + b.r, a.g + b.g, a.b + b.b}; }
-inline Rgb mix(const Rgb& a, const Rgb& b, float t) { return a * (1 - t) + b * t; }
+inline Rgb operator*(const Rgb& c, float s) {
+  return {c.r * s, c.g * s, c.b * s};
+}
+inline Rgb operator+(const Rgb& a, const Rgb& b) {
+  return {a.r + b.r, a.g + b.g, a.b + b.b};
+}
+inline Rgb mix(const Rgb& a, const Rgb& b, float t) {
+  return a * (1 - t) + b * t;
+}
 
 // [0, 1] → byte, clamped and rounded.
 uint8_t to_byte(float v);
@@ -21,7 +27,8 @@ uint8_t to_byte(float v);
 struct Image {
   int width = 0, height = 0;
   std::vector<uint8_t> rgb;  // (height x width x 3), row 0 at the top
-  std::vector<float> depth;  // (height x width) camera-space z (m), +inf where nothing; may be empty
+  std::vector<float>
+      depth;  // (height x width) camera-space z (m), +inf where nothing; may be empty
 
   Image() = default;
   Image(int w, int h);  // black, no depth channel
@@ -52,7 +59,9 @@ void write_png(const std::string& path, const Image& img);
 // It knows digits, letters (lower case drawn as upper case) and . , - + _ : = / ( ) % < > | [ ] #
 // and space; anything else draws as a small box.
 int text_width(const std::string& s, int scale);
-inline int text_height(int scale) { return 7 * scale; }
+inline int text_height(int scale) {
+  return 7 * scale;
+}
 // Draws s with its top-left corner at (x, y).
 void draw_text(Image& img, int x, int y, const std::string& s, const Rgb& color, int scale);
 

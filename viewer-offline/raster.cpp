@@ -12,17 +12,17 @@
 namespace grains::viewer {
 namespace {
 
-constexpr int kTile = 32;        // tile side (pixels) for binning spheres
-constexpr float kNear = 1e-3f;   // near plane (m): grains closer than this are not drawn
+constexpr int kTile = 32;       // tile side (pixels) for binning spheres
+constexpr float kNear = 1e-3f;  // near plane (m): grains closer than this are not drawn
 constexpr float kInf = std::numeric_limits<float>::infinity();
-constexpr int32_t kNone = -1;    // id buffer: background
+constexpr int32_t kNone = -1;  // id buffer: background
 // id buffer: >= 0 a grain (global index), <= -2 the ground patch of plane collider (-2 - k)
 
 // One grain in camera space with its clipped pixel bounds (inclusive); x0 > x1 when not drawn.
 struct Splat {
-  Vec3 c;         // centre, camera space (m)
-  float r = 0;    // radius (m)
-  float c2 = 0;   // |c|^2 - r^2
+  Vec3 c;        // centre, camera space (m)
+  float r = 0;   // radius (m)
+  float c2 = 0;  // |c|^2 - r^2
   int x0 = 1, y0 = 0, x1 = 0, y1 = 0;
 };
 
@@ -49,12 +49,14 @@ float grain_variation(int32_t id) {
   return 1.0f + 0.12f * ((h & 0xffff) / 65535.0f - 0.5f);
 }
 
-Vec3 rotate_to_camera(const Camera& c, const Vec3& w) { return {dot(w, c.right), dot(w, c.up), dot(w, c.forward)}; }
+Vec3 rotate_to_camera(const Camera& c, const Vec3& w) {
+  return {dot(w, c.right), dot(w, c.up), dot(w, c.forward)};
+}
 
 // A plane collider's ground patch, in the plane's local frame (y = 0, x and z on the plane).
 struct GroundPatch {
-  int k = 0;          // collider index
-  Vec3 n_c, o_c;      // normal and a point, camera space
+  int k = 0;                       // collider index
+  Vec3 n_c, o_c;                   // normal and a point, camera space
   float cx = 0, cz = 0, half = 2;  // patch centre and half-width, local units
   float spacing = 0.5f;            // grid spacing, local units
 };
@@ -91,11 +93,16 @@ GroundPatch make_patch(int k, const ColliderState& col, const Camera& c, const B
 // Bounding-sphere radius of a finite collider's local shape (before the pose's scale).
 float local_bound(const Shape& s) {
   switch (s.kind) {
-    case ShapeKind::Box: return 0.5f * length(s.size);
-    case ShapeKind::Sphere: return s.radius;
-    case ShapeKind::Torus: return s.radius + s.tube;
-    case ShapeKind::Capsule: return 0.5f * s.height + s.radius;
-    case ShapeKind::Plane: break;
+    case ShapeKind::Box:
+      return 0.5f * length(s.size);
+    case ShapeKind::Sphere:
+      return s.radius;
+    case ShapeKind::Torus:
+      return s.radius + s.tube;
+    case ShapeKind::Capsule:
+      return 0.5f * s.height + s.radius;
+    case ShapeKind::Plane:
+      break;
   }
   return 0;
 }
@@ -143,7 +150,8 @@ void draw_edge(Image& img, const Camera& cam, Vec3 a, Vec3 b, float ra, float rb
     float z = 1 / (iz0 + (iz1 - iz0) * s);  // perspective-correct depth
     float r = ra + (rb - ra) * s;
     // coverage of each pixel [k - 0.5, k + 0.5] by the band [y - hw, y + hw]
-    int k0 = static_cast<int>(std::floor(y - hw + 0.5f)), k1 = static_cast<int>(std::floor(y + hw + 0.5f));
+    int k0 = static_cast<int>(std::floor(y - hw + 0.5f)),
+        k1 = static_cast<int>(std::floor(y + hw + 0.5f));
     for (int k = std::max(k0, 0); k <= std::min(k1, H - 1); ++k) {
       float cov = std::min(k + 0.5f, y + hw) - std::max(k - 0.5f, y - hw);
       if (cov <= 0) continue;
@@ -186,17 +194,20 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
     std::vector<float> values;
     for (size_t k = 0; k < objects.size(); ++k) {
       const ParticleStore& o = *objects[k];
-      AttribDomain dom = by_attr ? attribute_values(o, settings.color_by.attribute, values) : AttribDomain::None;
+      AttribDomain dom =
+          by_attr ? attribute_values(o, settings.color_by.attribute, values) : AttribDomain::None;
       const int32_t* id = o.i_if("id");
       for (size_t i = 0; i < o.size(); ++i) {
         if (dom == AttribDomain::Point)
           albedo[base + i] = colormap(settings.color_by.t(values[i]));
         else
-          albedo[base + i] = settings.sand * (settings.grain_variation && id ? grain_variation(id[i]) : 1.0f);
+          albedo[base + i] =
+              settings.sand * (settings.grain_variation && id ? grain_variation(id[i]) : 1.0f);
       }
       if (dom == AttribDomain::Edge) {
         edge_colors[k].resize(o.prim_count());
-        for (size_t e = 0; e < o.prim_count(); ++e) edge_colors[k][e] = colormap(settings.color_by.t(values[e]));
+        for (size_t e = 0; e < o.prim_count(); ++e)
+          edge_colors[k][e] = colormap(settings.color_by.t(values[e]));
       }
       const float* P = o.v3_if("P");
       const float* ps = o.f_if("pscale");
@@ -230,7 +241,8 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
   const int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
   const int ntiles = tiles_x * tiles_y;
   const int nthreads = omp_get_max_threads();
-  std::vector<std::vector<std::vector<uint32_t>>> bins(nthreads, std::vector<std::vector<uint32_t>>(ntiles));
+  std::vector<std::vector<std::vector<uint32_t>>> bins(nthreads,
+                                                       std::vector<std::vector<uint32_t>>(ntiles));
   double radius_sum = 0;
   int64_t drawn = 0;
 #pragma omp parallel reduction(+ : radius_sum, drawn)
@@ -288,7 +300,7 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
   std::vector<GroundPatch> patches;
   struct Solid {
     const ColliderState* col;
-    Vec3 bc;  // bounding sphere centre, camera space
+    Vec3 bc;   // bounding sphere centre, camera space
     float br;  // bounding sphere radius (m)
   };
   std::vector<Solid> solids;
@@ -297,7 +309,8 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
     if (col.shape.kind == ShapeKind::Plane)
       patches.push_back(make_patch(static_cast<int>(k), col, c, settings.scene));
     else
-      solids.push_back({&col, c.to_camera(col.pose.t), local_bound(col.shape) * col.pose.s * 1.01f + 1e-4f});
+      solids.push_back(
+          {&col, c.to_camera(col.pose.t), local_bound(col.shape) * col.pose.s * 1.01f + 1e-4f});
   }
   if (!patches.empty()) {
 #pragma omp parallel for schedule(static)
@@ -407,10 +420,13 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
         float facing = std::fabs(dot(normalized(d), n));
         float foot = z * length(d) / c.focal / std::max(0.15f, facing) / col.pose.s;
         float u = (l.x - g->cx) / g->spacing, w = (l.z - g->cz) / g->spacing;
-        float du = std::fabs(u - std::round(u)) * g->spacing, dw = std::fabs(w - std::round(w)) * g->spacing;
+        float du = std::fabs(u - std::round(u)) * g->spacing,
+              dw = std::fabs(w - std::round(w)) * g->spacing;
         float line_w = 0.04f * g->spacing;
-        float ink = std::max(1 - smoothstep(line_w, line_w + foot, du), 1 - smoothstep(line_w, line_w + foot, dw));
-        ink *= std::clamp(1.5f * g->spacing / std::max(foot, 1e-9f) / 8, 0.0f, 1.0f);  // fade dense grids
+        float ink = std::max(1 - smoothstep(line_w, line_w + foot, du),
+                             1 - smoothstep(line_w, line_w + foot, dw));
+        ink *= std::clamp(1.5f * g->spacing / std::max(foot, 1e-9f) / 8, 0.0f,
+                          1.0f);  // fade dense grids
         Rgb base = mix(ground, grid, 0.7f * ink);
         if (shade) {
           float light = 0.7f + 0.3f * std::max(0.0f, dot(n, key));
@@ -480,9 +496,12 @@ Image render_frame(const std::vector<const ParticleStore*>& objects, const Camer
       const float* ps = o.f_if("pscale");
       for (size_t e = 0; e < o.prim_count(); ++e) {
         int32_t a = prims[2 * e], b = prims[2 * e + 1];
-        if (a < 0 || b < 0 || static_cast<size_t>(a) >= o.size() || static_cast<size_t>(b) >= o.size()) continue;
+        if (a < 0 || b < 0 || static_cast<size_t>(a) >= o.size() ||
+            static_cast<size_t>(b) >= o.size())
+          continue;
         const Rgb& ec = edge_colors[k].empty() ? settings.edge_color : edge_colors[k][e];
-        draw_edge(img, cam, load3(P, a), load3(P, b), ps ? ps[a] : 0, ps ? ps[b] : 0, ec, settings.edge_width);
+        draw_edge(img, cam, load3(P, a), load3(P, b), ps ? ps[a] : 0, ps ? ps[b] : 0, ec,
+                  settings.edge_width);
       }
     }
   }

@@ -90,8 +90,8 @@ AttribDomain attribute_values(const ParticleStore& pts, const std::string& attr,
 Rgb colormap(float t);
 
 struct ColorBy {
-  std::string attribute;   // empty: every grain in the sand colour
-  float min = 0, max = 1;  // mapped onto the colour bar, bottom (min) to top (max)
+  std::string attribute;       // empty: every grain in the sand colour
+  float min = 0, max = 1;      // mapped onto the colour bar, bottom (min) to top (max)
   float t(float value) const;  // value → [0, 1]
 };
 
@@ -110,15 +110,15 @@ std::string format_value(double v);
 
 struct RenderSettings {
   ColorBy color_by;
-  Rgb sand{0.80f, 0.66f, 0.45f};     // grain colour when not coloured by an attribute
+  Rgb sand{0.80f, 0.66f, 0.45f};        // grain colour when not coloured by an attribute
   Rgb edge_color{0.16f, 0.13f, 0.11f};  // edge colour when edges are not coloured
-  bool shading = true;    // false: flat albedo, no lighting or occlusion (exact colours)
+  bool shading = true;          // false: flat albedo, no lighting or occlusion (exact colours)
   bool grain_variation = true;  // +-6% brightness per grain id, for a natural sand look
-  int supersample = 2;    // rendered at this multiple of the camera's size, box-filtered down
+  int supersample = 2;          // rendered at this multiple of the camera's size, box-filtered down
   bool draw_edges = true;
-  float edge_width = 1.0f;  // pixels
-  bool color_bar = true;  // when colouring by an attribute
-  std::string caption;    // top-left text, e.g. "frame 12  t 0.500 s"
+  float edge_width = 1.5f;  // pixels
+  bool color_bar = true;    // when colouring by an attribute
+  std::string caption;      // top-left text, e.g. "frame 12  t 0.500 s"
   // Scene extent (e.g. the grains over all frames) that sizes the ground patch of each plane
   // collider; when invalid, the patch is 4 m wide around the plane's origin.
   Bounds scene;
@@ -127,7 +127,8 @@ struct RenderSettings {
 // Renders one or several particle objects together, with optional colliders (their end-of-frame
 // pose). The image has the camera's size and a depth channel (camera z, +inf for background).
 Image render_frame(const std::vector<const ParticleStore*>& objects, const Camera& cam,
-                   const RenderSettings& settings, const std::vector<ColliderState>& colliders = {});
+                   const RenderSettings& settings,
+                   const std::vector<ColliderState>& colliders = {});
 Image render_frame(const ParticleStore& pts, const Camera& cam, const RenderSettings& settings,
                    const std::vector<ColliderState>& colliders = {});
 
@@ -152,18 +153,18 @@ Image contact_sheet(const std::vector<Image>& frames, const std::vector<int>& fr
 // ---- the command -----------------------------------------------------------------------------
 
 struct RenderOptions {
-  std::string dir;          // folder of frame_NNNN.ply (or of one sub-folder per object)
-  std::string out;          // output folder; default DIR/render
-  std::string graph;        // graph file: colliders and fps
-  std::string color_by;     // attribute to colour by
-  std::string video;        // .mp4 (or anything ffmpeg writes) via ffmpeg; .gif written here
-  std::string camera;       // "ex,ey,ez,tx,ty,tz,fov"; empty = frame everything
+  std::string dir;       // folder of frame_NNNN.ply (or of one sub-folder per object)
+  std::string out;       // output folder; default DIR/render
+  std::string graph;     // graph file: colliders and fps
+  std::string color_by;  // attribute to colour by
+  std::string video;     // .mp4 (or anything ffmpeg writes) via ffmpeg; .gif written here
+  std::string camera;    // "ex,ey,ez,tx,ty,tz,fov"; empty = frame everything
   std::string size = "960x540";
-  double fps = 0;           // 0: the graph's fps, else 24
+  double fps = 0;  // 0: the graph's fps, else 24
   int supersample = 2;
-  int threads = 0;          // 0: OpenMP's default
-  int sheet_frames = 12;    // thumbnails on the contact sheet
-  bool flat = false;        // flat colours: no lighting or occlusion
+  int threads = 0;        // 0: OpenMP's default
+  int sheet_frames = 12;  // thumbnails on the contact sheet
+  bool flat = false;      // flat colours: no lighting or occlusion
   bool quiet = false;
 };
 

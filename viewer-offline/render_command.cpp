@@ -50,7 +50,8 @@ std::map<int, std::string> frames_in(const fs::path& dir) {
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     std::smatch m;
     std::string f = e.path().filename().string();
-    if (e.is_regular_file() && std::regex_match(f, m, name)) out[std::stoi(m[1])] = e.path().string();
+    if (e.is_regular_file() && std::regex_match(f, m, name))
+      out[std::stoi(m[1])] = e.path().string();
   }
   return out;
 }
@@ -75,7 +76,8 @@ std::vector<FrameFiles> scan_frames(const std::string& dir, std::vector<std::str
       per_object.push_back(std::move(f));
     }
   }
-  if (per_object.empty()) throw BadInput(dir + ": no frame_NNNN.ply files (nor sub-folders holding them)");
+  if (per_object.empty())
+    throw BadInput(dir + ": no frame_NNNN.ply files (nor sub-folders holding them)");
   std::set<int> numbers;
   for (const auto& m : per_object)
     for (const auto& [k, v] : m) numbers.insert(k);
@@ -110,15 +112,18 @@ Camera parse_camera(const std::string& s, int w, int h) {
     try {
       size_t used = 0;
       v.push_back(std::stof(item, &used));
-      if (item.find_first_not_of(" \t", used) != std::string::npos) throw std::invalid_argument(item);
+      if (item.find_first_not_of(" \t", used) != std::string::npos)
+        throw std::invalid_argument(item);
     } catch (const std::exception&) {
       throw BadInput("--camera '" + s + "': '" + item + "' is not a number");
     }
   }
-  if (v.size() != 7) throw BadInput("--camera '" + s + "': expected ex,ey,ez,tx,ty,tz,fov (7 numbers)");
+  if (v.size() != 7)
+    throw BadInput("--camera '" + s + "': expected ex,ey,ez,tx,ty,tz,fov (7 numbers)");
   Vec3 eye{v[0], v[1], v[2]}, target{v[3], v[4], v[5]};
   if (length(target - eye) <= 0) throw BadInput("--camera '" + s + "': eye and target coincide");
-  if (!(v[6] > 1 && v[6] < 179)) throw BadInput("--camera '" + s + "': fov must be between 1 and 179 degrees");
+  if (!(v[6] > 1 && v[6] < 179))
+    throw BadInput("--camera '" + s + "': fov must be between 1 and 179 degrees");
   return Camera::look_at(eye, target, v[6], w, h);
 }
 
@@ -182,7 +187,8 @@ struct GraphColliders {
 // What the first pass learns from every frame.
 struct Survey {
   Bounds bounds;  // grains (P +- pscale) over all frames
-  float vmin = std::numeric_limits<float>::infinity(), vmax = -std::numeric_limits<float>::infinity();
+  float vmin = std::numeric_limits<float>::infinity(),
+        vmax = -std::numeric_limits<float>::infinity();
   bool found = false;  // the colour-by attribute exists somewhere
   size_t max_points = 0;
   std::string first_file;
@@ -307,13 +313,15 @@ class VideoSink {
     }
     std::string ffmpeg = find_on_path("ffmpeg");
     if (ffmpeg.empty())
-      throw BadInput("--video " + path + ": writing this needs ffmpeg on PATH, and there is none; "
+      throw BadInput("--video " + path +
+                     ": writing this needs ffmpeg on PATH, and there is none; "
                      "install it (apt-get install ffmpeg) or ask for a .gif, which needs nothing");
     char num[64];
     std::snprintf(num, sizeof num, "%dx%d -framerate %g", width, height, fps);
     // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
-    std::string cmd = shell_quote(ffmpeg) + " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " + num +
-                      " -i - -vf pad=ceil(iw/2)*2:ceil(ih/2)*2 -pix_fmt yuv420p " + shell_quote(path);
+    std::string cmd = shell_quote(ffmpeg) + " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " +
+                      num + " -i - -vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") +
+                      " -pix_fmt yuv420p " + shell_quote(path);
     std::signal(SIGPIPE, SIG_IGN);  // a dying ffmpeg must give a write error, not kill us
     pipe_ = ::popen(cmd.c_str(), "w");
     if (!pipe_) throw std::runtime_error("cannot start " + ffmpeg);
@@ -395,9 +403,10 @@ int run(const RenderOptions& opts) {
   auto t_survey = clock::now();
   Survey sv = survey(frames, opts.color_by);
   if (!opts.color_by.empty() && !sv.found)
-    throw BadInput("--color-by " + opts.color_by + ": no such point or edge attribute in any frame (" +
-                   sv.first_file + " has points: " + join(sv.point_attribs) +
-                   "; edges: " + join(sv.edge_attribs) + ")");
+    throw BadInput("--color-by " + opts.color_by +
+                   ": no such point or edge attribute in any frame (" + sv.first_file +
+                   " has points: " + join(sv.point_attribs) + "; edges: " + join(sv.edge_attribs) +
+                   ")");
   double survey_ms = ms_since(t_survey);
 
   RenderSettings settings;
@@ -421,7 +430,8 @@ int run(const RenderOptions& opts) {
   }
 
   // ---- pass 2: render ----
-  const std::vector<int> picks = contact_sheet_picks(static_cast<int>(frames.size()), opts.sheet_frames);
+  const std::vector<int> picks =
+      contact_sheet_picks(static_cast<int>(frames.size()), opts.sheet_frames);
   const ContactSheetLayout layout = contact_sheet_layout(static_cast<int>(picks.size()), W, H);
   std::vector<Image> thumbs;
   std::vector<int> thumb_numbers;
@@ -469,15 +479,18 @@ int run(const RenderOptions& opts) {
 
   if (!opts.quiet) {
     const double n = static_cast<double>(frames.size());
-    std::fprintf(stderr,
-                 "render: %zu frames of %dx%d (up to %zu grains) in %.2f s: survey %.0f ms, per frame "
-                 "%.0f ms read + %.0f ms render + %.0f ms write, %d threads\n",
-                 frames.size(), W, H, sv.max_points, ms_since(t_start) / 1000.0, survey_ms, read_ms / n,
-                 render_ms / n, write_ms / n, omp_get_max_threads());
+    std::fprintf(
+        stderr,
+        "render: %zu frames of %dx%d (up to %zu grains) in %.2f s: survey %.0f ms, per frame "
+        "%.0f ms read + %.0f ms render + %.0f ms write, %d threads\n",
+        frames.size(), W, H, sv.max_points, ms_since(t_start) / 1000.0, survey_ms, read_ms / n,
+        render_ms / n, write_ms / n, omp_get_max_threads());
     if (!opts.color_by.empty())
       std::fprintf(stderr, "render: %s from %s to %s over all frames\n", opts.color_by.c_str(),
-                   format_value(settings.color_by.min).c_str(), format_value(settings.color_by.max).c_str());
-    std::fprintf(stderr, "render: frames in %s\nrender: contact sheet %s\n", out.c_str(), sheet_path.c_str());
+                   format_value(settings.color_by.min).c_str(),
+                   format_value(settings.color_by.max).c_str());
+    std::fprintf(stderr, "render: frames in %s\nrender: contact sheet %s\n", out.c_str(),
+                 sheet_path.c_str());
     if (video) std::fprintf(stderr, "render: video %s\n", opts.video.c_str());
   }
   return kOk;
@@ -504,26 +517,34 @@ int render_command(const RenderOptions& opts) {
 }
 
 CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
-  auto* r = app.add_subcommand("render", "render a folder of written frames to PNGs, a contact sheet "
-                                         "and a video, with no window and no GPU");
-  r->add_option("dir", o.dir, "folder of frame_NNNN.ply (or of one sub-folder per object)")->required();
+  auto* r = app.add_subcommand("render",
+                               "render a folder of written frames to PNGs, a contact sheet "
+                               "and a video, with no window and no GPU");
+  r->add_option("dir", o.dir, "folder of frame_NNNN.ply (or of one sub-folder per object)")
+      ->required();
   r->add_option("--out", o.out, "output folder (default DIR/render)");
-  r->add_option("--graph", o.graph, "graph file: draws its colliders at each frame's time, uses its fps");
+  r->add_option("--graph", o.graph,
+                "graph file: draws its colliders at each frame's time, uses its fps");
   r->add_option("--color-by", o.color_by,
                 "attribute to colour by: v (speed), id, pscale, strain (edges), any float or int "
                 "attribute, a vector (its magnitude) or NAME.x/.y/.z; the range spans all frames");
-  r->add_option("--video", o.video, "also write a video: FILE.mp4 (needs ffmpeg) or FILE.gif (built in)");
-  r->add_option("--camera", o.camera, "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "
-                                      "(default: frames every grain of every frame)");
+  r->add_option("--video", o.video,
+                "also write a video: FILE.mp4 (needs ffmpeg) or FILE.gif (built in)");
+  r->add_option("--camera", o.camera,
+                "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "
+                "(default: frames every grain of every frame)");
   r->add_option("--size", o.size, "image size WxH (default 960x540)");
-  r->add_option("--fps", o.fps, "frames per second for times and the video (default: the graph's, else 24)")
+  r->add_option("--fps", o.fps,
+                "frames per second for times and the video (default: the graph's, else 24)")
       ->check(CLI::PositiveNumber);
   r->add_option("--supersample", o.supersample, "samples per pixel along each axis (default 2)")
       ->check(CLI::Range(1, 4));
-  r->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  r->add_option("--threads", o.threads, "worker threads (default: all cores)")
+      ->check(CLI::PositiveNumber);
   r->add_option("--sheet-frames", o.sheet_frames, "frames on the contact sheet (default 12)")
       ->check(CLI::Range(1, 64));
-  r->add_flag("--flat", o.flat, "flat colours (exactly the colour bar's), no lighting or occlusion");
+  r->add_flag("--flat", o.flat,
+              "flat colours (exactly the colour bar's), no lighting or occlusion");
   r->add_flag("--quiet", o.quiet, "print nothing but errors");
   return r;
 }

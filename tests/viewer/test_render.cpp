@@ -67,7 +67,9 @@ Px pixel(const Image& img, int x, int y) {
   const uint8_t* p = img.px(x, y);
   return {p[0], p[1], p[2]};
 }
-Px bytes(const Rgb& c) { return {to_byte(c.r), to_byte(c.g), to_byte(c.b)}; }
+Px bytes(const Rgb& c) {
+  return {to_byte(c.r), to_byte(c.g), to_byte(c.b)};
+}
 std::ostream& operator<<(std::ostream& os, const Px& p) {
   return os << "(" << p.r << "," << p.g << "," << p.b << ")";
 }
@@ -164,8 +166,10 @@ TEST_CASE("nearer spheres hide farther ones, per pixel", "[viewer]") {
     // big (tag 1) at the origin, small (tag 0) at (0.4, 0, 0.15): the small centre is nearer, so
     // a painter's sort would draw the small one over the big one everywhere; but at x = 0.25 the
     // big surface (z = sqrt(0.5^2 - 0.25^2) = 0.433) is nearer than the small one (z = 0.15 +
-    // sqrt(0.2^2 - 0.15^2) = 0.282), and at x = 0.45 the small one (z = 0.344) beats the big (0.218)
-    Image img = render_frame(spheres({{0, 0, 0}, {0.4f, 0, 0.15f}}, {0.5f, 0.2f}, {1, 0}), cam, flat("tag"));
+    // sqrt(0.2^2 - 0.15^2) = 0.282), and at x = 0.45 the small one (z = 0.344) beats the big
+    // (0.218)
+    Image img = render_frame(spheres({{0, 0, 0}, {0.4f, 0, 0.15f}}, {0.5f, 0.2f}, {1, 0}), cam,
+                             flat("tag"));
     float px, py;
     cam.project({0.25f, 0, 0.433f}, &px, &py, nullptr);
     CHECK(pixel(img, static_cast<int>(px), static_cast<int>(py)) == far_colour);
@@ -225,7 +229,8 @@ TEST_CASE("edges are drawn as depth-tested lines", "[viewer]") {
   ParticleStore p = spheres({{-0.5f, 0, 0}, {0.5f, 0, 0}, {0.35f, 0, 1.5f}}, {0.05f, 0.05f, 0.12f});
   p.add_prim(0, 1);
   Image img = render_frame(p, cam, s);
-  Image bare = render_frame(spheres({{-0.5f, 0, 0}, {0.5f, 0, 0}, {0.35f, 0, 1.5f}}, {0.05f, 0.05f, 0.12f}), cam, s);
+  Image bare = render_frame(
+      spheres({{-0.5f, 0, 0}, {0.5f, 0, 0}, {0.35f, 0, 1.5f}}, {0.05f, 0.05f, 0.12f}), cam, s);
   float px, py;
   cam.project({-0.1f, 0, 0}, &px, &py, nullptr);  // on the line, in the open
   Px on_line = pixel(img, static_cast<int>(px), static_cast<int>(py));
@@ -440,6 +445,22 @@ TEST_CASE("render command: colliders from a graph, the grains binary, exit codes
     CHECK(test::read_text(log).find("ffmpeg") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir + "/a.mp4"));
   }
+  SECTION("with ffmpeg on PATH, raw RGB frames are piped to it") {
+    // a stand-in ffmpeg that records its arguments and copies stdin into the output file
+    std::string bin = test::temp_dir("fakeffmpeg");
+    std::string script = test::write_file(
+        bin, "ffmpeg",
+        "#!/bin/sh\necho \"$@\" > " + bin + "/args\nfor last; do :; done\ncat > \"$last\"\n");
+    std::filesystem::permissions(script, std::filesystem::perms::owner_all);
+    std::string cmd = "PATH=" + bin + ":$PATH " + std::string(GRAINS_BINARY) + " render " + dir +
+                      " --size 32x24 --fps 12 --video " + dir + "/a.mp4 > " + log + " 2>&1";
+    int rc = std::system(cmd.c_str());
+    INFO(test::read_text(log));
+    CHECK(WEXITSTATUS(rc) == 0);
+    CHECK(std::filesystem::file_size(dir + "/a.mp4") == 2u * 32 * 24 * 3);
+    std::string args = test::read_text(bin + "/args");
+    CHECK(args.find("-pix_fmt rgb24 -s 32x24 -framerate 12") != std::string::npos);
+  }
 }
 
 namespace {
@@ -492,7 +513,8 @@ bool decode_gif(const std::vector<uint8_t>& b, Gif& g) {
     for (;;) {
       if ((bitpos + size + 7) / 8 > data.size()) return false;
       int code = 0;
-      for (int i = 0; i < size; ++i, ++bitpos) code |= ((data[bitpos / 8] >> (bitpos % 8)) & 1) << i;
+      for (int i = 0; i < size; ++i, ++bitpos)
+        code |= ((data[bitpos / 8] >> (bitpos % 8)) & 1) << i;
       if (code == clear) {
         reset();
         size = min_size + 1;
@@ -548,7 +570,8 @@ TEST_CASE("GIF writer: palette colours round-trip through LZW", "[viewer]") {
     for (const auto& f : frames) w.add_frame(f);
   }
   std::ifstream in(dir + "/t.gif", std::ios::binary);
-  std::vector<uint8_t> bytes_((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<uint8_t> bytes_((std::istreambuf_iterator<char>(in)),
+                              std::istreambuf_iterator<char>());
   Gif g;
   REQUIRE(decode_gif(bytes_, g));
   CHECK(g.width == 150);
@@ -561,7 +584,8 @@ TEST_CASE("GIF writer: palette colours round-trip through LZW", "[viewer]") {
       for (int x = 0; x < 150; ++x) {
         int i = g.frames[f][y * 150 + x];
         const uint8_t* p = frames[f].px(x, y);
-        same = same && g.palette[3 * i] == p[0] && g.palette[3 * i + 1] == p[1] && g.palette[3 * i + 2] == p[2];
+        same = same && g.palette[3 * i] == p[0] && g.palette[3 * i + 1] == p[1] &&
+               g.palette[3 * i + 2] == p[2];
       }
     CHECK(same);
   }
@@ -593,11 +617,15 @@ TEST_CASE("render time for 100,000 grains", "[.][viewer][bench]") {
     const int reps = 3;
     Image img;
     for (int k = 0; k < reps; ++k) img = render_frame(p, cam, s, {ground});
-    double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / reps;
-    WARN("100k grains, 960x540, supersample " << ss << ", " << omp_get_max_threads() << " threads: " << ms << " ms");
+    double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
+        reps;
+    WARN("100k grains, 960x540, supersample " << ss << ", " << omp_get_max_threads()
+                                              << " threads: " << ms << " ms");
     auto t1 = std::chrono::steady_clock::now();
     write_png(test::temp_dir("bench") + "/f.png", img);
-    double png_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count();
+    double png_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count();
     WARN("  PNG write: " << png_ms << " ms");
     CHECK(ms < 1000);
   }

@@ -139,7 +139,7 @@ void register_grains_node() {
       ParamDecl::Float("particle_separation", 0.1,
                        "mean grain diameter hint: radius of points without pscale, mass-shock length scale").positive().unit("m"),
       ParamDecl::Int("constraint_iterations", 10, "Jacobi iterations per substep; about twice the stacking height").at_least(1),
-      ParamDecl::Toggle("assume_uniform_radius", true, "all grains share one radius: faster neighbour search"),
+      ParamDecl::Toggle("assume_uniform_radius", true, "search every grain as the largest one, with one grid cell size: faster; for grains of one size"),
       ParamDecl::Float("friction_with_colliders", 1, "grain-collider friction; 0 slides, 1 matches the collider's velocity")
           .at_least(0).scaled_by("friction"),
       ParamDecl::Float("friction_with_particles", 1, "grain-grain friction; 0 slides, 1 sticks")

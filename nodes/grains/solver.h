@@ -101,6 +101,7 @@ class GrainsSolver {
   std::vector<float> pair_normal_, pair_normal_it_;  // (neighbour entries) m
   std::vector<float> collider_normal_;               // (n) m
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
+  std::vector<float> search_radius_;  // (n) m: the largest radius, with assume_uniform_radius
   std::vector<float> radius_;       // (n) m: pscale, or particle_separation / 2 when missing
   std::vector<float> mass_;         // (n) kg: copy of mass, or 1 when missing
   std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)

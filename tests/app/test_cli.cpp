@@ -46,7 +46,7 @@ TEST_CASE("run writes every frame and stats.csv", "[cli]") {
   CHECK_THAT(log, Catch::Contains("frame 3/3"));
 }
 
-TEST_CASE("--quiet prints nothing and --set overrides a parameter", "[cli]") {
+TEST_CASE("quiet prints nothing and set overrides a parameter", "[cli]") {
   std::string dir = temp_dir("cli_set");
   std::string graph = write_file(dir, "drop.json", kGraph);
   REQUIRE(run_grains("run " + graph + " --out " + dir + "/a --frames 1 --quiet --set src.separation=0.15",

@@ -53,7 +53,7 @@ TEST_CASE("every local variable reads with and without $", "[expression]") {
   CHECK(e.eval(v) == Approx(10 * 2 + 11));
 }
 
-TEST_CASE("fit maps the frame into [0, 1], clamped", "[expression]") {
+TEST_CASE("fit maps the frame into 0..1 and clamps", "[expression]") {
   Expression e("fit($SF, 0, 48, 0, 1)", {});
   ExprVars v;
   const std::vector<std::pair<double, double>> cases = {
@@ -168,7 +168,7 @@ TEST_CASE("added functions", "[expression]") {
   CHECK(eval1("max(3, 2)") == 3);
 }
 
-TEST_CASE("rand is deterministic and in [0, 1)", "[expression]") {
+TEST_CASE("rand is deterministic and in 0..1", "[expression]") {
   Expression e("rand($SF)", {});
   ExprVars v;
   double sum = 0;

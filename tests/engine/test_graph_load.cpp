@@ -183,7 +183,7 @@ TEST_CASE("a source file that does not exist", "[graph][bad]") {
               "/nodes/0/params/file", "file not found");
 }
 
-TEST_CASE("--set overrides are validated like the file", "[graph]") {
+TEST_CASE("set overrides are validated like the file", "[graph]") {
   register_builtin_nodes();
   Graph g = parse_graph(kGood, "g.json", {parse_override("solver.substeps=5")});
   CHECK(g.nodes[3].params.at("substeps").channels[0].value == 5);

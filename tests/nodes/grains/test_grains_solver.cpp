@@ -533,7 +533,7 @@ TEST_CASE("over-relaxation speeds up convergence of a stack", "[grains]") {
   CHECK(boosted < 0.8f * plain);
 }
 
-TEST_CASE("constraint averaging moves an asymmetric clump's centre; disabling it does not",
+TEST_CASE("constraint averaging moves an asymmetric clump's centre and disabling it does not",
           "[grains]") {
   // Help page: averaging "does not preserve momentum", so clumps "accelerate under their own
   // force"; disabling it avoids these ghost forces. An L of three overlapping grains in zero

@@ -1,0 +1,246 @@
+// Parameter conformance (STYLE.md, after Gaffer): for every node type and every parameter it
+// declares, changing the parameter from its default changes the result. A parameter that is
+// accepted but ignored fails here. Each node runs in a small scene where it acts; some
+// parameters need context (a shape's radius matters only for that shape), given per parameter.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "tests/support/support.h"
+
+using namespace grains;
+using json = nlohmann::json;
+
+namespace {
+
+// A different value for a parameter, within its declared range.
+json changed_value(const ParamDecl& d) {
+  auto clampv = [&](double v) {
+    if (d.has_max) v = std::min(v, d.max);
+    if (d.has_min && v <= d.min) v = d.min + (d.has_max ? (d.max - d.min) * 0.5 : 1.0);
+    return v;
+  };
+  switch (d.type) {
+    case ParamType::Float: {
+      double v = d.def[0] == 0 ? 0.5 : d.def[0] * 0.3;
+      if (d.has_max && d.def[0] >= d.max) v = d.max * 0.5;
+      return clampv(v);
+    }
+    case ParamType::Int: return static_cast<int>(clampv(d.def[0] > 2 ? std::floor(d.def[0] / 3) : d.def[0] + 2));
+    case ParamType::Toggle: return d.def[0] == 0;
+    case ParamType::Vec3: return json::array({d.def[0] + 0.3, d.def[1] + 0.5, d.def[2] + 0.7});
+    case ParamType::Menu:
+      for (const auto& m : d.menu)
+        if (m != d.def_string) return m;
+      return d.def_string;
+    case ParamType::String: return d.def_string + "x";
+    case ParamType::StringList: return json::array();
+  }
+  return nullptr;
+}
+
+// The final state of a graph, reduced to what a user would see.
+struct Outcome {
+  std::vector<float> P, v;
+  std::map<std::string, std::vector<int32_t>> groups;
+  size_t points = 0;
+  bool operator==(const Outcome& o) const {
+    return P == o.P && v == o.v && groups == o.groups && points == o.points;
+  }
+};
+
+Outcome run(const json& graph, int frames) {
+  Graph g = test::graph_from(graph.dump(), test::source_dir() + "/tests/conformance.json");
+  Simulation sim(g, 1);
+  for (int f = 0; f < frames; ++f) sim.step_frame();
+  Outcome o;
+  const ParticleStore& pts = sim.object(0).pts;
+  o.points = pts.size();
+  o.P = pts.find("P")->f;
+  o.v = pts.find("v")->f;
+  for (const auto& [name, a] : pts.attributes())
+    if (name.rfind("group_", 0) == 0) o.groups[name] = a.i;
+  return o;
+}
+
+// A scene for one node type: the node under test is named "n"; params are merged in.
+using Scene = std::function<json(const json& params)>;
+
+json base_graph(json nodes) {
+  return {{"grains_graph", 1}, {"fps", 24}, {"frames", 12}, {"seed", 5}, {"nodes", nodes}};
+}
+
+// Grains of mixed sizes in a loose heap above a tilted ground, with some spin of velocities.
+json heap_source(double sep = 0.1) {
+  return {{"name", "src"}, {"type", "source"},
+          {"params", {{"shape", "box"}, {"size", {0.5, 0.6, 0.5}}, {"center", {0, 0.4, 0}},
+                      {"separation", sep}, {"jitter", 0.2}, {"velocity", {0.6, -0.5, 0.2}},
+                      {"mass", 2}}}};
+}
+
+json ground(double tilt = 8) {
+  return {{"name", "ground"}, {"type", "collider"},
+          {"params", {{"shape", "plane"}, {"rotate", {tilt, 0, tilt / 2}}, {"bounce", 0.4}}}};
+}
+
+std::map<std::string, Scene> scenes() {
+  std::map<std::string, Scene> s;
+  s["source"] = [](const json& p) {
+    json src = {{"name", "n"}, {"type", "source"}, {"params", {{"size", {0.4, 0.4, 0.4}}, {"separation", 0.1}}}};
+    src["params"].update(p);
+    return base_graph({src,
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"n"}}, {"params", {{"force", {0, -9.81, 0}}}}},
+                       ground(),
+                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"g"}},
+                        {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+  };
+  auto pop = [](const std::string& type, json defaults) {
+    return [type, defaults](const json& p) {
+      json n = {{"name", "n"}, {"type", type}, {"inputs", {"g"}}, {"params", defaults}};
+      n["params"].update(p);
+      return base_graph({heap_source(),
+                         {{"name", "g"}, {"type", "force"}, {"inputs", {"src"}},
+                          {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                         n, ground(),
+                         {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                          {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+    };
+  };
+  s["force"] = pop("force", {{"force", {0.5, 1, 0}}});
+  s["group"] = pop("group", {{"group_name", "g1"}, {"size", {0.5, 0.3, 0.5}}});
+  s["kill"] = pop("kill", {{"center", {0, 0.5, 0}}, {"size", {0.3, 0.3, 0.3}}});
+  s["grains"] = [](const json& p) {
+    json n = {{"name", "n"}, {"type", "grains"}, {"inputs", {"g"}},
+              {"params", {{"particle_separation", 0.1}, {"constraint_iterations", 6},
+                          {"assume_uniform_radius", false}}}};
+    n["params"].update(p);
+    json fine = heap_source(0.05);
+    fine["name"] = "fine";
+    fine["params"]["center"] = {0.1, 0.9, 0};
+    return base_graph({heap_source(), fine,
+                       {{"name", "m"}, {"type", "merge"}, {"inputs", {"src", "fine"}}},
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"m"}},
+                        {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                       n, ground(),
+                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                        {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+  };
+  s["collider"] = [](const json& p) {
+    json c = {{"name", "n"}, {"type", "collider"}, {"params", {{"shape", "box"}, {"size", {2, 0.2, 2}}}}};
+    c["params"].update(p);
+    return base_graph({heap_source(),
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"src"}},
+                        {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                       c,
+                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"g"}},
+                        {"params", {{"substeps", 2}, {"colliders", {"n"}}}}}});
+  };
+  s["solver"] = [](const json& p) {
+    json sv = {{"name", "n"}, {"type", "solver"}, {"inputs", {"g"}}, {"params", {{"colliders", {"ground"}}}}};
+    sv["params"].update(p);
+    return base_graph({heap_source(),
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"src"}},
+                        {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                       ground(), sv});
+  };
+  return s;
+}
+
+// Context a parameter needs to matter, and non-generic changed values.
+struct Special {
+  json context;     // merged into both runs
+  json changed;     // the changed value (null: generic)
+};
+std::map<std::string, Special> specials() {
+  return {
+      // source
+      {"source.radius", {{{"shape", "sphere"}}, nullptr}},
+      {"source.size", {json::object(), json::array({0.3, 0.6, 0.5})}},
+      {"source.file", {{{"shape", "file"}, {"file", "data/points_a.ply"}}, "data/points_b.ply"}},
+      {"source.shape", {json::object(), "sphere"}},
+      {"source.packing", {json::object(), "hexagonal"}},
+      {"source.birth_frame", {json::object(), 3}},
+      {"source.rate", {{{"emission", "rate"}}, 50}},
+      {"source.start_frame", {{{"emission", "rate"}, {"rate", 100}}, 4}},
+      {"source.end_frame", {{{"emission", "rate"}, {"rate", 100}}, 3}},
+      {"source.density", {{{"density", 100}}, 300}},  // mass changes collider response? see below
+      {"source.mass", {json::object(), 3}},
+      {"source.group", {json::object(), "fresh"}},
+      {"source.activation", {json::object(), 0}},
+      // group
+      {"group.group_name", {json::object(), "other"}},
+      {"group.radius", {{{"rule", "sphere"}}, 0.2}},
+      {"group.attribute", {{{"rule", "attribute"}, {"attribute", "id"}, {"value", 10}}, "P_x"}},
+      {"group.compare", {{{"rule", "attribute"}, {"attribute", "id"}, {"value", 10}}, "<"}},
+      {"group.value", {{{"rule", "attribute"}, {"attribute", "id"}, {"value", 10}}, 30}},
+      {"group.operation", {{{"rule", "sphere"}, {"radius", 0.2}}, "subtract"}},
+      {"group.activation", {json::object(), 0}},
+      // force
+      {"force.group", {json::object(), "nobody"}},
+      {"force.wind", {{{"drag", 1}}, json::array({1, 0, 0})}},
+      {"force.ignore_mass", {{{"force", {0, 1, 0}}}, true}},
+      {"force.activation", {json::object(), 0}},
+      // kill
+      {"kill.radius", {{{"shape", "sphere"}}, 0.3}},
+      {"kill.activation", {json::object(), 0}},
+      // collider
+      {"collider.shape", {json::object(), "sphere"}},
+      {"collider.radius", {{{"shape", "sphere"}}, 0.4}},
+      {"collider.tube", {{{"shape", "torus"}, {"radius", 0.2}, {"translate", {0, 0, 0}}}, 0.3}},
+      {"collider.height", {{{"shape", "capsule"}, {"rotate", {90, 0, 0}}, {"radius", 0.1}}, 0.1}},
+      {"collider.normal", {{{"shape", "plane"}}, json::array({0.3, 1, 0})}},
+      {"collider.scale", {json::object(), 1.5}},
+      // solver
+      {"solver.colliders", {json::object(), json::array()}},
+      // grains
+      {"grains.activation", {json::object(), 0}},
+      {"grains.group", {json::object(), "nobody"}},
+      // a hint for missing pscale and the mass-shock length scale
+      {"grains.particle_separation", {{{"enable_mass_shock_scaling", true}}, 0.05}},
+      // candidates at exactly the contact distance miss contacts that form during iterations
+      {"grains.neighbor_query_scale", {json::object(), 1.0}},
+      // mixed radii: searched as the largest, small grains' candidate lists fill with farther
+      // grains once max_neighbors caps them
+      {"grains.assume_uniform_radius", {{{"max_neighbors", 6}}, true}},
+      {"grains.shock_scaling_power", {{{"enable_mass_shock_scaling", true}}, 3}},
+      {"grains.shock_axis", {{{"enable_mass_shock_scaling", true}}, json::array({1, 0, 0})}},
+      {"grains.shock_origin", {{{"enable_mass_shock_scaling", true}}, json::array({0, 2, 0})}},
+      {"grains.mass_shock_method", {{{"enable_mass_shock_scaling", true}}, "local"}},
+      {"grains.clumping_stiffness", {{{"clumping_weight", 0.5}}, 1}},
+      {"grains.static_threshold", {json::object(), 0.1}},
+      {"grains.drift_threshold", {json::object(), 0.5}},
+      {"grains.max_speed", {json::object(), 0.5}},
+      {"grains.max_acceleration", {json::object(), 5}},
+      {"grains.max_neighbors", {json::object(), 2}},
+      {"grains.internal_collisions_stiffness", {json::object(), 2}},
+  };
+}
+
+}  // namespace
+
+TEST_CASE("every parameter of every node type changes the result", "[conformance]") {
+  register_builtin_nodes();
+  auto sc = scenes();
+  auto sp = specials();
+  for (const NodeTypeInfo* t : node_types()) {
+    if (t->params.empty()) continue;  // merge has none
+    INFO("node type " << t->type);
+    REQUIRE(sc.count(t->type));
+    for (const ParamDecl& d : t->params) {
+      std::string key = t->type + "." + d.name;
+      INFO("parameter " << key);
+      json context = json::object(), value = changed_value(d);
+      if (auto it = sp.find(key); it != sp.end()) {
+        context = it->second.context;
+        if (!it->second.changed.is_null()) value = it->second.changed;
+      }
+      json changed = context;
+      changed[d.name] = value;
+      Outcome a = run(sc[t->type](context), 12);
+      Outcome b = run(sc[t->type](changed), 12);
+      CHECK_FALSE(a == b);
+    }
+  }
+}

@@ -418,8 +418,9 @@ std::vector<double> log_ticks(double lo, double hi) {  // lo, hi: log10 bounds
   std::vector<double> out;
   bool fine = hi - lo < 2.5;
   for (int d = int(std::floor(lo)); d <= int(std::ceil(hi)); ++d)
-    for (int m : {1, 2, 5}) {
+    for (int m : {1, 2, 3, 5}) {
       if (m != 1 && !fine) continue;
+      if (m == 3 && hi - lo > 1.2) continue;
       double v = m * std::pow(10.0, d);
       double lv = std::log10(v);
       if (lv >= lo - 1e-9 && lv <= hi + 1e-9) out.push_back(v);
@@ -450,7 +451,7 @@ const RGB kPalette[] = {{31, 119, 180}, {214, 39, 40},  {44, 160, 44},  {255, 12
                         {148, 103, 189}, {140, 86, 75}, {227, 119, 194}, {23, 190, 207}};
 
 void write_pareto_png(const std::vector<std::vector<BenchRow>>& scenes, const std::string& path) {
-  Canvas c(1000, 640);
+  Canvas c(1120, 640);
   const int X0 = 100, X1 = 760, Y0 = 60, Y1 = 560;
   const RGB black{0, 0, 0}, grey{225, 225, 225}, dark{90, 90, 90};
   Range rx, ry;

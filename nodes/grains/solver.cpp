@@ -113,34 +113,45 @@ void GrainsSolver::find_planes(const float* P, const float* p, const ColliderSta
   const float* radius = radius_.data();
   // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
   // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
-  // toward where it came from still finds the surface it moved away from.
+  // toward where it came from still finds the surface it moved away from. Up to GR_MAX_PLANES
+  // candidates are kept, nearest first (ties by collider order).
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < n; ++i) {
     Vec3 x = load3(p, i);
     float range = query_scale * radius[i] + length(x - load3(P, i));
-    float best = std::numeric_limits<float>::infinity();
-    int32_t best_c = -1;
-    Vec3 best_n;
+    float dist[GR_MAX_PLANES];
+    Vec3 nrm[GR_MAX_PLANES];
+    int32_t idx[GR_MAX_PLANES];
+    int count = 0;
     for (size_t c = 0; c < collider_count; ++c) {
       Vec3 nc;
-      float dist = colliders[c].distance(x, &nc);
-      if (dist < range && dist < best) {
-        best = dist;
-        best_c = static_cast<int32_t>(c);
-        best_n = nc;
+      float d = colliders[c].distance(x, &nc);
+      if (!(d < range)) continue;
+      // insertion into the nearest-first list
+      int at = count < GR_MAX_PLANES ? count : GR_MAX_PLANES;
+      while (at > 0 && d < dist[at - 1]) --at;
+      if (at >= GR_MAX_PLANES) continue;
+      int last = std::min(count, GR_MAX_PLANES - 1);
+      for (int k = last; k > at; --k) {
+        dist[k] = dist[k - 1];
+        nrm[k] = nrm[k - 1];
+        idx[k] = idx[k - 1];
       }
+      dist[at] = d;
+      nrm[at] = nc;
+      idx[at] = static_cast<int32_t>(c);
+      count = std::min(count + 1, GR_MAX_PLANES);
     }
-    which[i] = best_c;
-    float* pl = plane + 9 * i;
-    if (best_c < 0) {
-      std::fill(pl, pl + 9, 0.0f);
-      continue;
+    float* pl = plane + 9 * GR_MAX_PLANES * i;
+    std::fill(pl, pl + 9 * GR_MAX_PLANES, 0.0f);
+    for (int k = 0; k < GR_MAX_PLANES; ++k) which[GR_MAX_PLANES * i + k] = k < count ? idx[k] : -1;
+    for (int k = 0; k < count; ++k) {
+      Vec3 xs = x - nrm[k] * dist[k];
+      Vec3 vc = colliders[idx[k]].velocity_at(xs);
+      store3(pl + 9 * k, 0, xs);
+      store3(pl + 9 * k, 1, nrm[k]);
+      store3(pl + 9 * k, 2, vc);
     }
-    Vec3 xs = x - best_n * best;
-    Vec3 vc = colliders[best_c].velocity_at(xs);
-    store3(pl, 0, xs);
-    store3(pl, 1, best_n);
-    store3(pl, 2, vc);
   }
 }
 
@@ -209,7 +220,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       !s.accurate_friction && colliders_on && s.friction_with_colliders > 0;
   gr_normal_sums acc{nullptr, nullptr, nullptr};
   if (collider_friction_pass) {
-    collider_normal_.assign(n, 0.0f);
+    collider_normal_.assign(GR_MAX_PLANES * n, 0.0f);
     acc.collider = collider_normal_.data();
   }
 
@@ -259,8 +270,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (pairs_on) find_pairs(true);
   if (colliders_on) {
-    plane_.resize(9 * n);
-    plane_collider_.resize(n);
+    plane_.resize(9 * GR_MAX_PLANES * n);
+    plane_collider_.resize(GR_MAX_PLANES * n);
     find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
     g.plane = plane_.data();
   }

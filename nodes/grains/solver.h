@@ -105,8 +105,8 @@ class GrainsSolver {
   std::vector<float> radius_;       // (n) m: pscale, or particle_separation / 2 when missing
   std::vector<float> mass_;         // (n) kg: copy of mass, or 1 when missing
   std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)
-  std::vector<float> plane_;        // (n x 9): collider plane point, normal, surface velocity
-  std::vector<int32_t> plane_collider_;  // (n): collider index of the plane, -1 none
+  std::vector<float> plane_;        // (n x GR_MAX_PLANES x 9): planes nearest first: point, normal, velocity
+  std::vector<int32_t> plane_collider_;  // (n x GR_MAX_PLANES): collider index of each plane, -1 none
 };
 
 }  // namespace grains

@@ -13,7 +13,7 @@
 typedef struct {
   GR_GLOBAL float* pair_iteration; /* (neighbour entries) overlap this iteration, scratch */
   GR_GLOBAL float* pair;           /* (neighbour entries) sum over iterations of overlap / n_i */
-  GR_GLOBAL float* collider;       /* (n) the same for the collider plane */
+  GR_GLOBAL float* collider;       /* (n x GR_MAX_PLANES) the same for the collider planes */
 } gr_normal_sums;
 
 GR_INLINE gr_float3 gr_average(gr_float3 p, gr_float3 sum, int count, float omega,
@@ -27,9 +27,9 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
                                int i, int with_friction, const gr_normal_sums* acc) {
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0;
-  float pen = 0.0f;
+  float pen[GR_MAX_PLANES];
   if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
-  if (g->plane) count += gr_gather_collider(g, prm, p, i, with_friction, &pen, &sum);
+  if (g->plane) count += gr_gather_collider(g, prm, p, i, with_friction, pen, &sum);
   if (acc->pair || acc->collider) {
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {
@@ -37,7 +37,10 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
       for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k)
         acc->pair[k] += acc->pair_iteration[k] * share;
     }
-    if (acc->collider) acc->collider[i] += pen * share;
+    if (acc->collider && g->plane) {
+      int k;
+      for (k = 0; k < GR_MAX_PLANES; ++k) acc->collider[GR_MAX_PLANES * i + k] += pen[k] * share;
+    }
   }
   return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_averaging);
 }
@@ -49,7 +52,7 @@ GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
   int count = 0;
   if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
   if (acc->collider && g->plane)
-    count += gr_gather_collider_friction(g, prm, p, acc->collider[i], i, &sum);
+    count += gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &sum);
   return gr_average(gr_load3(p, i), sum, count, 1.0f, prm->disable_averaging);
 }
 

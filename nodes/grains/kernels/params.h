@@ -5,6 +5,9 @@
 #define GRAINS_KERNELS_PARAMS_H
 #include "prelude.h"
 
+/* contact planes kept per grain (FleX keeps six; corners of boxes need three) */
+#define GR_MAX_PLANES 4
+
 typedef struct {
   float dt;                    /* substep length (s) */
   float stiffness_denominator; /* substeps * constraint_iterations: k -> min(1, k / this) */
@@ -50,8 +53,9 @@ typedef struct {
   const GR_GLOBAL float* attractionstiffness; /* (n) optional */
   const GR_GLOBAL gr_uint* nbr_offsets;       /* (n + 1) neighbour rows, or null: no pairs */
   const GR_GLOBAL gr_uint* nbr_indices;
-  /* (n x 9): collider contact plane per grain: surface point (m), unit normal, surface velocity
-   * (m/s); a zero normal means no collider within range. Null when there are no colliders. */
+  /* (n x GR_MAX_PLANES x 9): collider contact planes per grain, nearest first: surface point
+   * (m), unit normal, surface velocity (m/s); a zero normal ends the list. Null when there are
+   * no colliders. */
   const GR_GLOBAL float* plane;
 } gr_grains;
 

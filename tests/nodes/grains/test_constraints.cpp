@@ -9,7 +9,10 @@
 #include <cstdint>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "tests/nodes/grains/grains_harness.h"
+#include "tests/support/support.h"
 
 using namespace grains;
 using namespace grains::test;
@@ -344,4 +347,68 @@ TEST_CASE("constraints give the same result for any thread count", "[grains][con
   auto one = run(1);
   CHECK(one == run(2));
   CHECK(one == run(4));
+}
+
+// --- constraint sources (nodes/source.cpp) -------------------------------------------------
+
+namespace {
+
+// The points and primitives after frame 1 of a graph with one source "src" (params merged in)
+// and no forces.
+ParticleStore emitted(const nlohmann::json& params) {
+  nlohmann::json src = {{"name", "src"}, {"type", "source"}, {"params", params}};
+  nlohmann::json g = {{"grains_graph", 1}, {"fps", 24}, {"frames", 1}, {"seed", 1},
+                      {"nodes", {src, {{"name", "s"}, {"type", "solver"}, {"inputs", {"src"}}}}}};
+  Graph graph = test::graph_from(g.dump(), test::source_dir() + "/tests/constraints.json");
+  Simulation sim(graph, 1);
+  sim.step_frame();
+  return sim.object(0).pts;
+}
+
+}  // namespace
+
+TEST_CASE("source connect_radius joins the grains of one emission", "[grains][constraints][source]") {
+  // A 5 x 5 grid at 0.1 m: 1.1 separations reach the 2 x 5 x 4 = 40 edge neighbours; 1.5 also
+  // the 2 x 4 x 4 = 32 diagonals (0.1 sqrt 2 = 0.141 < 0.15). Rest length = the birth distance.
+  nlohmann::json grid = {{"shape", "grid"}, {"size", {0.4, 0.0, 0.4}}, {"separation", 0.1}};
+  CHECK(emitted(grid).prim_count() == 0);
+  grid["connect_radius"] = 1.1;
+  ParticleStore edges = emitted(grid);
+  REQUIRE(edges.size() == 25);
+  CHECK(edges.prim_count() == 40);
+  grid["connect_radius"] = 1.5;
+  ParticleStore both = emitted(grid);
+  REQUIRE(both.prim_count() == 72);
+  const float* rest = both.prim_f_if("restlength");
+  const float* P = both.v3_if("P");
+  REQUIRE(rest);
+  int diagonals = 0;
+  for (size_t q = 0; q < both.prim_count(); ++q) {
+    float d = length(load3(P, both.prim_points()[2 * q]) - load3(P, both.prim_points()[2 * q + 1]));
+    CHECK(std::fabs(rest[q] - d) < 1e-6f);
+    diagonals += rest[q] > 0.12f;
+    CHECK(both.prim_f_if("strength")[q] == 1.0f);
+  }
+  CHECK(diagonals == 32);
+}
+
+TEST_CASE("source image turns a mask into a connected sheet", "[grains][constraints][source]") {
+  // tests/data/mask_half.png: 40 x 20 pixels, opaque in the left half. Size 1.9 x 0.9 at 0.1 m
+  // gives a 20 x 10 grid of 2 x 2 pixel blocks; the left 10 columns are kept: 100 grains in the
+  // plane y = centre.y, connected (default 1.5 separations) along 90 + 90 edges and 2 x 9 x 9 =
+  // 162 diagonals.
+  nlohmann::json img = {{"shape", "image"}, {"file", "data/mask_half.png"}, {"size", {1.9, 0, 0.9}},
+                        {"separation", 0.1}, {"center", {0, 0.5, 0}}};
+  ParticleStore s = emitted(img);
+  REQUIRE(s.size() == 100);
+  CHECK(s.prim_count() == 342);
+  const float* P = s.v3_if("P");
+  float xmax = -1e9f;
+  for (size_t i = 0; i < s.size(); ++i) {
+    CHECK(P[3 * i + 1] == Approx(0.5f));
+    xmax = std::max(xmax, P[3 * i]);
+  }
+  CHECK(xmax < 0.0f);  // the opaque half is the left (-x) half
+  img["threshold"] = 1.0;  // nothing exceeds full coverage
+  CHECK(emitted(img).size() == 0);
 }

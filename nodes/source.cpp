@@ -1,10 +1,19 @@
 // source: a stream generator. Fills a box, sphere or grid at `separation` (grid or hexagonal
-// packing, optional jitter), or reads points from a PLY/OBJ file; emits once at a frame or at a
-// rate over a frame range, with an initial velocity. pscale defaults to separation/2 and mass
-// comes from density when one is given.
+// packing, optional jitter), reads points from a PLY/OBJ file, or turns an image mask into a flat
+// sheet; emits once at a frame or at a rate over a frame range, with an initial velocity. pscale
+// defaults to separation/2 and mass comes from density when one is given. With connect_radius,
+// each emission's grains are joined by explicit constraints (2-point primitives) to the grains
+// of the same emission within connect_radius x separation.
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
+#include <stdexcept>
+#include <unordered_map>
+
+#define STB_IMAGE_IMPLEMENTATION
+#include <stb_image.h>
 
 #include "engine/geometry_io.h"
 #include "engine/node.h"
@@ -27,6 +36,7 @@ class SourceNode : public Node {
       size_t first = ctx.pts.size();
       emit(ctx, pts);
       if (p.s("shape") == "file") copy_file_attributes(ctx, first);
+      connect(ctx, first);
     } else {  // rate
       int f = ctx.time.frame;
       if (f < p.i("start_frame") || f > p.i("end_frame")) return;
@@ -35,7 +45,9 @@ class SourceNode : public Node {
       carry_ -= count;
       std::vector<Vec3> pts;
       for (int k = 0; k < count; ++k) pts.push_back(random_point(ctx));
+      size_t first = ctx.pts.size();
       emit(ctx, pts);
+      connect(ctx, first);
     }
   }
 
@@ -54,6 +66,7 @@ class SourceNode : public Node {
     }
     float s = static_cast<float>(p.f("separation"));
     Vec3 size = p.v3("size");
+    if (shape == "image") return image_sheet(ctx, c, size, s);
     float radius = static_cast<float>(p.f("radius"));
     bool hex = p.s("packing") == "hexagonal";
     if (shape == "sphere") size = Vec3{2 * radius, 2 * radius, 2 * radius};
@@ -83,6 +96,94 @@ class SourceNode : public Node {
           out.push_back(q);
         }
     return out;
+  }
+
+  // An image mask as a flat sheet in the xz plane, size.x by size.z centred at c: one grain per
+  // block of pixels at the separation (a grid like the `grid` shape), kept where the block's
+  // mean alpha, or luminance without an alpha channel, in [0, 1], exceeds `threshold`. Image
+  // rows run along +z, columns along +x (viewed from above with +z down the page it reads
+  // upright).
+  std::vector<Vec3> image_sheet(CookContext& ctx, const Vec3& c, const Vec3& size, float s) {
+    std::string path = resolve_path(ctx.base_dir, ctx.params.s("file"));
+    int w = 0, h = 0, channels = 0;
+    unsigned char* img = stbi_load(path.c_str(), &w, &h, &channels, 0);
+    if (!img) throw std::runtime_error("source: cannot read image " + path + ": " + stbi_failure_reason());
+    auto coverage = [&](int x, int y) {
+      const unsigned char* px = img + (static_cast<size_t>(y) * w + x) * channels;
+      if (channels == 2 || channels == 4) return px[channels - 1] / 255.0f;
+      if (channels == 1) return px[0] / 255.0f;
+      return (0.299f * px[0] + 0.587f * px[1] + 0.114f * px[2]) / 255.0f;
+    };
+    int nx = std::max(1, static_cast<int>(std::floor(size.x / s + 1e-4f)) + 1);
+    int nz = std::max(1, static_cast<int>(std::floor(size.z / s + 1e-4f)) + 1);
+    Vec3 lo = c - Vec3{(nx - 1) * s, 0, (nz - 1) * s} * 0.5f;
+    float threshold = static_cast<float>(ctx.params.f("threshold"));
+    std::vector<Vec3> out;
+    for (int k = 0; k < nz; ++k)
+      for (int i = 0; i < nx; ++i) {
+        // the block of pixels this grain covers (at least one pixel)
+        int x0 = i * w / nx, x1 = std::max(x0 + 1, (i + 1) * w / nx);
+        int y0 = k * h / nz, y1 = std::max(y0 + 1, (k + 1) * h / nz);
+        double sum = 0;
+        for (int y = y0; y < y1; ++y)
+          for (int x = x0; x < x1; ++x) sum += coverage(x, y);
+        if (sum / ((x1 - x0) * (y1 - y0)) > threshold) out.push_back(lo + Vec3{i * s, 0, k * s});
+      }
+    stbi_image_free(img);
+    return out;
+  }
+
+  // Explicit constraints between the grains of one emission (points first..end) closer than
+  // connect_radius x separation: restlength = the distance at birth, strength 1, strain 0. A
+  // hash grid of that cell size finds the pairs; each pair once, in a fixed order.
+  void connect(CookContext& ctx, size_t first) {
+    const ParamSet& p = ctx.params;
+    float factor = static_cast<float>(p.f("connect_radius"));
+    if (factor == 0 && p.s("shape") == "image") factor = 1.5f;  // image sheets come connected
+    ParticleStore& s = ctx.pts;
+    const size_t end = s.size();
+    float R = factor * static_cast<float>(p.f("separation"));
+    if (!(R > 0) || end - first < 2) return;
+    const float* P = s.v3("P");
+    auto cell_of = [&](const Vec3& x) {
+      return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(x.x / R)),
+                                    static_cast<int64_t>(std::floor(x.y / R)),
+                                    static_cast<int64_t>(std::floor(x.z / R))};
+    };
+    auto key = [](int64_t x, int64_t y, int64_t z) {
+      return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
+    };
+    std::unordered_map<int64_t, std::vector<uint32_t>> grid;
+    for (size_t i = first; i < end; ++i) {
+      auto q = cell_of(load3(P, i));
+      grid[key(q[0], q[1], q[2])].push_back(static_cast<uint32_t>(i));
+    }
+    std::vector<std::pair<uint32_t, uint32_t>> pairs;
+    std::vector<float> rest;
+    for (size_t i = first; i < end; ++i) {
+      Vec3 xi = load3(P, i);
+      auto q = cell_of(xi);
+      size_t row = pairs.size();
+      for (int64_t dz = -1; dz <= 1; ++dz)
+        for (int64_t dy = -1; dy <= 1; ++dy)
+          for (int64_t dx = -1; dx <= 1; ++dx) {
+            auto it = grid.find(key(q[0] + dx, q[1] + dy, q[2] + dz));
+            if (it == grid.end()) continue;
+            for (uint32_t j : it->second) {
+              if (j <= i) continue;
+              float dist = length(load3(P, j) - xi);
+              if (dist < R) pairs.push_back({static_cast<uint32_t>(i), j});
+            }
+          }
+      // hash collisions may list a cell twice: keep each pair once, in order of j
+      std::sort(pairs.begin() + row, pairs.end());
+      pairs.erase(std::unique(pairs.begin() + row, pairs.end()), pairs.end());
+    }
+    for (auto [a, b] : pairs) {
+      size_t q = s.add_prim(static_cast<int32_t>(a), static_cast<int32_t>(b));
+      s.prim_f("restlength")[q] = length(load3(P, a) - load3(P, b));
+      s.prim_f("strength")[q] = 1.0f;
+    }
   }
 
   Vec3 random_point(CookContext& ctx) {
@@ -185,12 +286,17 @@ void register_source_node() {
   t.role = NodeRole::Source;
   t.params = {
       ParamDecl::Float("activation", 1, "the node emits only while this is greater than 0"),
-      ParamDecl::Menu("shape", {"box", "sphere", "grid", "file"}, "box",
-                      "what to fill: a box, a sphere, a one-layer grid in the xz plane, or the points of `file`"),
+      ParamDecl::Menu("shape", {"box", "sphere", "grid", "file", "image"}, "box",
+                      "what to fill: a box, a sphere, a one-layer grid in the xz plane, the points of `file`, or a "
+                      "sheet in the xz plane (size x, z) from the PNG mask `file`"),
       ParamDecl::Vector("center", {0, 0, 0}, "centre of the shape; offset added to file points").unit("m"),
       ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box or grid").unit("m"),
       ParamDecl::Float("radius", 0.5, "radius of the sphere").positive().unit("m"),
-      ParamDecl::String("file", "", "PLY or OBJ file of points (shape \"file\"), relative to the graph"),
+      ParamDecl::String("file", "", "PLY or OBJ file of points (shape \"file\") or PNG mask (shape \"image\"), relative to the graph"),
+      ParamDecl::Float("threshold", 0.5, "image: a grain where the pixel block's alpha (or luminance) exceeds this").range(0, 1),
+      ParamDecl::Float("connect_radius", 0,
+                       "connect each new grain to those of the same emission within this times the separation "
+                       "(0: none; image: 1.5, edges and diagonals)").at_least(0),
       ParamDecl::Float("separation", 0.1, "distance between neighbouring grains").positive().unit("m"),
       ParamDecl::Menu("packing", {"grid", "hexagonal"}, "grid", "cubic grid or hexagonal close packing"),
       ParamDecl::Float("jitter", 0, "random offset of each grain, as a fraction of the separation").range(0, 1),
@@ -208,8 +314,8 @@ void register_source_node() {
   };
   t.make = [] { return std::make_unique<SourceNode>(); };
   t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
-    if (p.s("shape") == "file") {
-      if (p.s("file").empty()) return {"shape \"file\" needs a `file`", "file"};
+    if (p.s("shape") == "file" || p.s("shape") == "image") {
+      if (p.s("file").empty()) return {"shape \"" + p.s("shape") + "\" needs a `file`", "file"};
       std::string path = resolve_path(base, p.s("file"));
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
     }

@@ -50,8 +50,10 @@ class GrainsNode : public Node {
       shock_.assign(n, 1.0f);
       d.shockmass = shock_.data();
     }
+    if (st.constraint_weight > 0) gather_constraints(s, d);
     GrainsStats stats;
     solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), &stats);
+    if (d.prim_count > 0) scatter_constraints(s);
 
     float* P = s.v3("P");
     float* v = s.v3("v");
@@ -92,6 +94,14 @@ class GrainsNode : public Node {
     st.shock_origin = p.v3("shock_origin");
     st.clumping_weight = static_cast<float>(p.f("clumping_weight"));
     st.clumping_stiffness = static_cast<float>(p.f("clumping_stiffness"));
+    st.constraint_weight = static_cast<float>(p.f("explicit_constraints_weight"));
+    st.constraint_stiffness = static_cast<float>(p.f("explicit_constraints_stiffness"));
+    st.collide_mutually_constrained = p.b("collide_mutually_constrained_particles");
+    st.instantaneous_strain = p.b("instantaneous_strain");
+    st.strain_decay = static_cast<float>(p.f("strain_decay"));
+    st.break_constraints = p.b("break_constraints");
+    st.break_threshold = static_cast<float>(p.f("break_threshold"));
+    st.remove_strands = p.b("remove_strands");
     st.max_neighbors = p.i("max_neighbors");
     st.neighbor_query_scale = static_cast<float>(p.f("neighbor_query_scale"));
     st.max_speed = static_cast<float>(p.f("max_speed"));
@@ -104,6 +114,66 @@ class GrainsNode : public Node {
     st.final_collision_test = p.b("final_collision_test");
     st.disable_constraint_averaging = p.b("disable_constraint_averaging");
     return st;
+  }
+
+  // The primitives whose two endpoints are both gathered grains, with compact endpoints. A
+  // missing restlength is the distance now (stored, so it holds from here on).
+  void gather_constraints(ParticleStore& s, GrainsData& d) {
+    prims_.clear();
+    pairs_.clear();
+    const size_t m = s.prim_count();
+    if (m == 0) return;
+    compact_.assign(s.size(), -1);
+    for (size_t k = 0; k < idx_.size(); ++k) compact_[idx_[k]] = static_cast<int32_t>(k);
+    if (!s.prim_f_if("restlength")) {
+      float* rest = s.prim_f("restlength");
+      const float* P = s.v3("P");
+      const std::vector<int32_t>& e = s.prim_points();
+      for (size_t q = 0; q < m; ++q) rest[q] = length(load3(P, e[2 * q]) - load3(P, e[2 * q + 1]));
+    }
+    const std::vector<int32_t>& e = s.prim_points();
+    for (size_t q = 0; q < m; ++q) {
+      int32_t a = compact_[e[2 * q]], b = compact_[e[2 * q + 1]];
+      if (a < 0 || b < 0) continue;
+      prims_.push_back(static_cast<uint32_t>(q));
+      pairs_.insert(pairs_.end(), {a, b});
+    }
+    const size_t mc = prims_.size();
+    if (mc == 0) return;
+    const float* rest = s.prim_f("restlength");
+    const float* strength = s.prim_f("strength");
+    const float* strain = s.prim_f("strain");
+    rest_.resize(mc);
+    strength_.resize(mc);
+    strain_.resize(mc);
+    dead_.assign(mc, 0);
+    for (size_t c = 0; c < mc; ++c) {
+      rest_[c] = rest[prims_[c]];
+      strength_[c] = strength[prims_[c]];
+      strain_[c] = strain[prims_[c]];
+    }
+    d.prim_count = mc;
+    d.prim_points = pairs_.data();
+    d.restlength = rest_.data();
+    d.strength = strength_.data();
+    d.strain = strain_.data();
+    d.prim_dead = dead_.data();
+    d.constraintweight = optional(s, "constraintweight", cw_);
+    d.constraintstiffness = optional(s, "constraintstiffness", cs_);
+  }
+
+  // strain back to the primitives; broken constraints and strands removed
+  void scatter_constraints(ParticleStore& s) {
+    float* strain = s.prim_f("strain");
+    bool any_dead = false;
+    for (size_t c = 0; c < prims_.size(); ++c) {
+      strain[prims_[c]] = strain_[c];
+      any_dead = any_dead || dead_[c];
+    }
+    if (!any_dead) return;
+    std::vector<uint8_t> dead(s.prim_count(), 0);
+    for (size_t c = 0; c < prims_.size(); ++c) dead[prims_[c]] = dead_[c];
+    s.remove_prims(dead);
   }
 
   void gather3(const float* a, std::vector<float>& out) const {
@@ -125,6 +195,11 @@ class GrainsNode : public Node {
   GrainsSolver solver_;
   std::vector<uint32_t> idx_;
   std::vector<float> P_, v_, F_, mass_, r_, friction_, rw_, rs_, aw_, as_, shock_;
+  // explicit constraints of the gathered grains: store primitive index, compact endpoints
+  std::vector<int32_t> compact_, pairs_;
+  std::vector<uint32_t> prims_;
+  std::vector<float> rest_, strength_, strain_, cw_, cs_;
+  std::vector<uint8_t> dead_;
 };
 
 }  // namespace
@@ -132,7 +207,7 @@ class GrainsNode : public Node {
 void register_grains_node() {
   NodeTypeInfo t;
   t.type = "grains";
-  t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping).";
+  t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping, explicit constraints).";
   t.params = {
       ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
       ParamDecl::String("group", "", "act only on this point group of the stream (empty: the whole stream)"),
@@ -160,6 +235,24 @@ void register_grains_node() {
       ParamDecl::Float("clumping_weight", 0, "weight of the pull between nearby grains; 0 disables clumping")
           .range(0, 2).scaled_by("attractionweight"),
       ParamDecl::Float("clumping_stiffness", 100, "stiffness of clumping").at_least(0).scaled_by("attractionstiffness"),
+      ParamDecl::Float("explicit_constraints_weight", 1,
+                       "weight of the distance constraints of 2-point primitives (restlength); 0 skips them entirely")
+          .range(0, 2).scaled_by("constraintweight"),
+      ParamDecl::Float("explicit_constraints_stiffness", 1000,
+                       "stiffness of explicit constraints; full at substeps x iterations")
+          .at_least(0).scaled_by("constraintstiffness"),
+      ParamDecl::Toggle("collide_mutually_constrained_particles", false,
+                        "let constrained pairs collide too (needs them apart at rest)"),
+      ParamDecl::Toggle("instantaneous_strain", true,
+                        "strain = (length - restlength) / restlength at the end of each substep; off: it accumulates "
+                        "each substep's change and fades at strain_decay"),
+      ParamDecl::Float("strain_decay", 1, "rate at which accumulated strain fades (instantaneous_strain off)")
+          .at_least(0).unit("1/s"),
+      ParamDecl::Toggle("break_constraints", false, "remove a constraint once |strain| exceeds strength x break_threshold"),
+      ParamDecl::Float("break_threshold", 0.05, "strain that breaks a constraint of strength 1 (0.05: 5% stretch)")
+          .positive(),
+      ParamDecl::Toggle("remove_strands", false,
+                        "remove chain-only constraints (both endpoints with at most 2 constraints), until none is left"),
       ParamDecl::Int("max_neighbors", 32, "most neighbour candidates kept per grain (nearest first)").at_least(1),
       ParamDecl::Float("neighbor_query_scale", 1.5, "candidates closer than this times the summed radii; also the clumping range")
           .at_least(1),

@@ -8,6 +8,11 @@
 //      without accurate_friction one friction-only pass follows the loop
 //   4. v from the motion, blend and caps, drift (kernels/velocity.h); the final collision pass
 //      (swept, so thin and moving colliders hold); write P and v; stats.
+//   5. explicit constraints: strain from the end positions, breaking, remove strands (the caller
+//      removes the primitives marked dead).
+// Explicit constraints join the iterations through a per-grain adjacency (CSR rows of (other
+// endpoint, primitive)) built once per substep from the primitives, so each grain gathers its own
+// constraint corrections like its contacts.
 // Every loop over grains is `omp parallel for schedule(static)` and each grain writes only its
 // own slots, so the result is bit-identical for any thread count; stats are reduced serially.
 #include "nodes/grains/solver.h"
@@ -19,6 +24,7 @@
 #include <cstring>
 #include <limits>
 
+#include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/iterate.h"
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
@@ -54,6 +60,9 @@ gr_params make_params(const GrainsSettings& s) {
   k.clumping_weight = s.clumping_weight;
   k.clumping_stiffness = s.clumping_stiffness;
   k.query_scale = s.neighbor_query_scale;
+  k.constraint_weight = s.constraint_weight;
+  k.constraint_stiffness = s.constraint_stiffness;
+  k.collide_constrained = s.collide_mutually_constrained ? 1 : 0;
   k.over_relaxation = s.over_relaxation;
   k.disable_averaging = s.disable_constraint_averaging ? 1 : 0;
   k.velocity_blend = s.velocity_blend;
@@ -104,6 +113,104 @@ void final_collision(const ColliderState* colliders, size_t collider_count, cons
 }
 
 }  // namespace
+
+// The constraint adjacency: row i lists (other endpoint, primitive) for every valid primitive
+// touching grain i, in primitive order (a serial fill: deterministic, O(m)).
+void GrainsSolver::build_constraints(const GrainsData& d) {
+  const size_t n = d.n, m = d.prim_count;
+  const int32_t* e = d.prim_points;
+  auto valid = [&](size_t p) {
+    int32_t a = e[2 * p], b = e[2 * p + 1];
+    return a >= 0 && b >= 0 && static_cast<size_t>(a) < n && static_cast<size_t>(b) < n && a != b;
+  };
+  con_offsets_.assign(n + 1, 0);
+  for (size_t p = 0; p < m; ++p)
+    if (valid(p)) {
+      ++con_offsets_[e[2 * p] + 1];
+      ++con_offsets_[e[2 * p + 1] + 1];
+    }
+  for (size_t i = 0; i < n; ++i) con_offsets_[i + 1] += con_offsets_[i];
+  con_other_.resize(con_offsets_[n]);
+  con_prim_.resize(con_offsets_[n]);
+  degree_.assign(n, 0);  // fill cursor
+  for (size_t p = 0; p < m; ++p) {
+    if (!valid(p)) continue;
+    uint32_t a = static_cast<uint32_t>(e[2 * p]), b = static_cast<uint32_t>(e[2 * p + 1]);
+    uint32_t ka = con_offsets_[a] + degree_[a]++, kb = con_offsets_[b] + degree_[b]++;
+    con_other_[ka] = b;
+    con_prim_[ka] = static_cast<uint32_t>(p);
+    con_other_[kb] = a;
+    con_prim_[kb] = static_cast<uint32_t>(p);
+  }
+}
+
+// Step 5: strain from the end-of-substep positions d.P (and the start P0_ for the accumulating
+// mode), breaking, remove strands. Marks removed primitives in d.prim_dead.
+void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, int threads,
+                                      GrainsStats* stats) {
+  const size_t n = d.n, m = d.prim_count;
+  const long lm = static_cast<long>(m);
+  const int32_t* e = d.prim_points;
+  uint8_t* dead = d.prim_dead;
+  if (!dead) {
+    dead_.assign(m, 0);
+    dead = dead_.data();
+  }
+  const float decay = std::exp(-std::max(0.0f, s.strain_decay) * s.dt);
+  const float* P0 = P0_.data();
+  float max_strain = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : max_strain)
+  for (long p = 0; p < lm; ++p) {
+    dead[p] = 0;
+    int32_t a = e[2 * p], b = e[2 * p + 1];
+    if (a < 0 || b < 0 || static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n || a == b)
+      continue;
+    float L = d.restlength[p];
+    float e_end = gr_strain(gr_load3(d.P, a), gr_load3(d.P, b), L);
+    float strain = e_end;
+    if (!s.instantaneous_strain) {
+      float e_start = gr_strain(gr_load3(P0, a), gr_load3(P0, b), L);
+      float prev = d.strain ? d.strain[p] : 0.0f;
+      strain = prev * decay + (e_end - e_start);
+    }
+    if (d.strain) d.strain[p] = strain;
+    float strength = d.strength ? d.strength[p] : 1.0f;
+    if (s.break_constraints && std::fabs(strain) > strength * s.break_threshold) {
+      dead[p] = 1;
+      continue;
+    }
+    max_strain = std::max(max_strain, std::fabs(strain));
+  }
+  if (s.remove_strands) {
+    // a constraint is chain-only when both endpoints have constraint degree <= 2; removing one
+    // lowers its endpoints' degrees, so repeat until a pass removes nothing
+    degree_.assign(n, 0);
+    auto valid = [&](long p) {
+      int32_t a = e[2 * p], b = e[2 * p + 1];
+      return !dead[p] && a >= 0 && b >= 0 && static_cast<size_t>(a) < n &&
+             static_cast<size_t>(b) < n && a != b;
+    };
+    for (long p = 0; p < lm; ++p)
+      if (valid(p)) {
+        ++degree_[e[2 * p]];
+        ++degree_[e[2 * p + 1]];
+      }
+    for (bool changed = true; changed;) {
+      changed = false;
+      for (long p = 0; p < lm; ++p) {
+        if (!valid(p) || degree_[e[2 * p]] > 2 || degree_[e[2 * p + 1]] > 2) continue;
+        dead[p] = 1;
+        --degree_[e[2 * p]];
+        --degree_[e[2 * p + 1]];
+        changed = true;
+      }
+    }
+  }
+  if (stats) {
+    stats->max_strain = max_strain;
+    for (size_t p = 0; p < m; ++p) stats->broken += dead[p];
+  }
+}
 
 void GrainsSolver::find_planes(const float* P, const float* p, const ColliderState* colliders,
                                size_t collider_count, float query_scale, int threads) {
@@ -205,6 +312,19 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   g.repulsionstiffness = d.repulsionstiffness;
   g.attractionweight = d.attractionweight;
   g.attractionstiffness = d.attractionstiffness;
+
+  // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
+  const bool constraints_on =
+      s.constraint_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
+  if (constraints_on) {
+    build_constraints(d);
+    g.con_offsets = con_offsets_.data();
+    g.con_other = con_other_.data();
+    g.con_prim = con_prim_.data();
+    g.restlength = d.restlength;
+    g.constraintweight = d.constraintweight;
+    g.constraintstiffness = d.constraintstiffness;
+  }
 
   // 1. predict
   p_.resize(3 * n);
@@ -317,6 +437,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       store3(d.v, i, v);
     }
   }
+
+  // 5. strain, breaking, strands
+  if (constraints_on) update_constraints(d, s, threads, stats);
 
   // stats: serial, in a fixed order
   if (stats && pairs_on) {

@@ -44,6 +44,22 @@ struct GrainsSettings {
   // clumping
   float clumping_weight = 0.0f;     // x attractionweight
   float clumping_stiffness = 100.0f;  // x attractionstiffness
+  // explicit constraints (kernels/distance.h): 2-point primitives keep their restlength
+  float constraint_weight = 1.0f;        // x constraintweight; 0 skips constraints entirely
+  float constraint_stiffness = 1000.0f;  // x constraintstiffness; full at substeps x iterations
+  bool collide_mutually_constrained = false;  // constrained pairs also collide
+  // strain e = (|x_i - x_j| - L) / L at the end of the substep. Instantaneous: strain = e.
+  // Accumulating: strain <- strain * exp(-strain_decay * dt) + (e_end - e_start), the change of
+  // stretch over the substep added to a memory that fades at strain_decay (1/s): with decay 0 it
+  // follows e like the instantaneous mode, with decay > 0 only recent stretching counts, so slow
+  // deformation is forgiven (plastic-like) while a fast pull still breaks.
+  bool instantaneous_strain = true;
+  float strain_decay = 1.0f;        // 1/s
+  bool break_constraints = false;   // remove a constraint once |strain| > strength * threshold
+  float break_threshold = 0.05f;    // instantaneous: 0.05 = 5% stretch breaks
+  // remove chain-only constraints: those whose two endpoints both have constraint degree <= 2,
+  // repeated until none is left (a solid's surface grains have degree >= 3)
+  bool remove_strands = false;
   // solver controls
   int max_neighbors = 32;
   float neighbor_query_scale = 1.5f;
@@ -74,6 +90,16 @@ struct GrainsData {
   const float* attractionweight = nullptr;     // (n) optional
   const float* attractionstiffness = nullptr;  // (n) optional
   float* shockmass = nullptr;  // (n) out when mass_shock == Global (may be nullptr otherwise)
+  // explicit constraints: m 2-point primitives over these grains. A primitive whose endpoints
+  // are out of range or equal is ignored (neither solved nor removed).
+  size_t prim_count = 0;                        // m
+  const int32_t* prim_points = nullptr;         // (m x 2) grain indices in [0, n)
+  const float* restlength = nullptr;            // (m) m
+  const float* strength = nullptr;              // (m) optional (1)
+  float* strain = nullptr;                      // (m) in/out (may be nullptr: not written)
+  uint8_t* prim_dead = nullptr;                 // (m) out: 1 = broken or a strand; may be nullptr
+  const float* constraintweight = nullptr;      // (n) optional
+  const float* constraintstiffness = nullptr;   // (n) optional
 };
 
 // Per-substep diagnostics.
@@ -81,6 +107,8 @@ struct GrainsStats {
   float max_penetration = 0;   // max overlap / (r_i + r_j) over pairs after the substep
   float mean_penetration = 0;  // mean over overlapping pairs
   size_t contacts = 0;         // overlapping pairs
+  float max_strain = 0;        // max |strain| over the constraints after the substep
+  size_t broken = 0;           // constraints removed this substep (broken or strands)
 };
 
 class GrainsSolver {
@@ -89,6 +117,8 @@ class GrainsSolver {
                size_t collider_count, GrainsStats* stats = nullptr);
 
  private:
+  void build_constraints(const GrainsData& d);
+  void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
   void find_planes(const float* P, const float* p, const ColliderState* colliders,
                    size_t collider_count, float query_scale, int threads);
 
@@ -107,6 +137,11 @@ class GrainsSolver {
   std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)
   std::vector<float> plane_;        // (n x GR_MAX_PLANES x 9): planes nearest first: point, normal, velocity
   std::vector<int32_t> plane_collider_;  // (n x GR_MAX_PLANES): collider index of each plane, -1 none
+  // explicit constraints: per-grain rows of (other endpoint, primitive), rebuilt each substep
+  std::vector<uint32_t> con_offsets_;      // (n + 1)
+  std::vector<uint32_t> con_other_, con_prim_;  // (2 m)
+  std::vector<uint32_t> degree_;           // (n) scratch: constraint degree (remove strands)
+  std::vector<uint8_t> dead_;              // (m) scratch when the caller gives no prim_dead
 };
 
 }  // namespace grains

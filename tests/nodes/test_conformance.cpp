@@ -46,8 +46,11 @@ struct Outcome {
   std::vector<float> P, v;
   std::map<std::string, std::vector<int32_t>> groups;
   size_t points = 0;
+  std::vector<int32_t> prims;  // the constraints' endpoints
+  std::vector<float> strain;
   bool operator==(const Outcome& o) const {
-    return P == o.P && v == o.v && groups == o.groups && points == o.points;
+    return P == o.P && v == o.v && groups == o.groups && points == o.points && prims == o.prims &&
+           strain == o.strain;
   }
 };
 
@@ -62,6 +65,8 @@ Outcome run(const json& graph, int frames) {
   o.v = pts.find("v")->f;
   for (const auto& [name, a] : pts.attributes())
     if (name.rfind("group_", 0) == 0) o.groups[name] = a.i;
+  o.prims = pts.prim_points();
+  if (const float* e = pts.prim_f_if("strain")) o.strain.assign(e, e + pts.prim_count());
   return o;
 }
 
@@ -127,6 +132,26 @@ std::map<std::string, Scene> scenes() {
                        {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
                         {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
   };
+  // explicit constraints: a connected sheet of overlapping grains (pscale 0.06 at 0.1 m) dropped
+  // on a sphere, and a connected line of grains (a strand) beside it
+  s["grains_constraints"] = [](const json& p) {
+    json n = {{"name", "n"}, {"type", "grains"}, {"inputs", {"g"}},
+              {"params", {{"particle_separation", 0.1}, {"constraint_iterations", 6}}}};
+    n["params"].update(p);
+    json sheet = {{"name", "sheet"}, {"type", "source"},
+                  {"params", {{"shape", "grid"}, {"size", {0.8, 0, 0.8}}, {"center", {0, 0.5, 0}},
+                              {"separation", 0.1}, {"pscale", 0.06}, {"connect_radius", 1.5}}}};
+    json line = {{"name", "line"}, {"type", "source"},
+                 {"params", {{"shape", "grid"}, {"size", {0.8, 0, 0}}, {"center", {0.2, 0.8, 0.6}},
+                             {"separation", 0.1}, {"connect_radius", 1.1}}}};
+    json ball = {{"name", "ball"}, {"type", "collider"}, {"params", {{"shape", "sphere"}, {"radius", 0.3}}}};
+    return base_graph({sheet, line, {{"name", "m"}, {"type", "merge"}, {"inputs", {"sheet", "line"}}},
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"m"}},
+                        {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                       n, ground(), ball,
+                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                        {"params", {{"substeps", 2}, {"colliders", {"ground", "ball"}}}}}});
+  };
   s["collider"] = [](const json& p) {
     json c = {{"name", "n"}, {"type", "collider"}, {"params", {{"shape", "box"}, {"size", {2, 0.2, 2}}}}};
     c["params"].update(p);
@@ -150,8 +175,9 @@ std::map<std::string, Scene> scenes() {
 
 // Context a parameter needs to matter, and non-generic changed values.
 struct Special {
-  json context;     // merged into both runs
-  json changed;     // the changed value (null: generic)
+  json context;       // merged into both runs
+  json changed;       // the changed value (null: generic)
+  std::string scene = "";  // the scene to run in (empty: the node type's own)
 };
 std::map<std::string, Special> specials() {
   return {
@@ -215,6 +241,19 @@ std::map<std::string, Special> specials() {
       {"grains.max_acceleration", {json::object(), 5}},
       {"grains.max_neighbors", {json::object(), 2}},
       {"grains.internal_collisions_stiffness", {json::object(), 2}},
+      // explicit constraints, in the connected-sheet scene
+      {"grains.explicit_constraints_weight", {json::object(), nullptr, "grains_constraints"}},
+      {"grains.explicit_constraints_stiffness", {json::object(), 2, "grains_constraints"}},
+      {"grains.collide_mutually_constrained_particles", {json::object(), nullptr, "grains_constraints"}},
+      {"grains.instantaneous_strain", {json::object(), nullptr, "grains_constraints"}},
+      {"grains.strain_decay", {{{"instantaneous_strain", false}}, nullptr, "grains_constraints"}},
+      {"grains.break_constraints", {json::object(), nullptr, "grains_constraints"}},
+      {"grains.break_threshold", {{{"break_constraints", true}}, nullptr, "grains_constraints"}},
+      {"grains.remove_strands", {json::object(), nullptr, "grains_constraints"}},
+      // source constraints
+      {"source.connect_radius", {json::object(), 1.5}},
+      {"source.threshold",
+       {{{"shape", "image"}, {"file", "data/mask_half.png"}, {"size", {1.9, 0, 0.9}}}, 1.0}},
   };
 }
 
@@ -238,8 +277,9 @@ TEST_CASE("every parameter of every node type changes the result", "[conformance
       }
       json changed = context;
       changed[d.name] = value;
-      Outcome a = run(sc[t->type](context), 12);
-      Outcome b = run(sc[t->type](changed), 12);
+      const Scene& scene = sc[sp.count(key) && !sp[key].scene.empty() ? sp[key].scene : t->type];
+      Outcome a = run(scene(context), 12);
+      Outcome b = run(scene(changed), 12);
       CHECK_FALSE(a == b);
     }
   }

@@ -17,6 +17,7 @@
 #ifndef GRAINS_KERNELS_CONTACT_H
 #define GRAINS_KERNELS_CONTACT_H
 #include "clumping.h"
+#include "distance.h"
 
 /* eqs. 23-25: the correction removing slip dx along the plane normal n, bound d (>= 0) */
 GR_INLINE gr_float3 gr_friction(gr_float3 dx, gr_float3 n, float bound, float static_threshold,
@@ -65,11 +66,15 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
   float repulse = prm->repulsion_weight > 0.0f ? gr_repulsion_scale(g, prm, i) : 0.0f;
   float clump = prm->clumping_weight > 0.0f ? gr_clump_scale(g, prm, i) : 0.0f;
   int fric = with_friction && prm->friction_with_particles > 0.0f;
+  int skip_constrained = g->con_offsets && !prm->collide_constrained;
   gr_uint k;
   for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
     int j = (int)g->nbr_indices[k];
     if (overlap_out) overlap_out[k] = 0.0f;
     if (j == i) continue;
+    /* constrained pairs do not collide unless asked (help page "Collide Mutually Constrained
+     * Particles"); they keep their rest length instead */
+    if (skip_constrained && gr_constrained(g, i, j)) continue;
     gr_float3 xij = gr_sub(pi, gr_load3(p, j));
     float dist = gr_length(xij);
     float rsum = ri + g->radius[j];

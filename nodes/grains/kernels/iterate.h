@@ -22,7 +22,8 @@ GR_INLINE gr_float3 gr_average(gr_float3 p, gr_float3 sum, int count, float omeg
   return gr_madd(p, sum, disable_averaging ? omega : omega / (float)count);
 }
 
-/* constraint loop: contacts (+ friction when with_friction), clumping, collider plane */
+/* constraint loop: contacts (+ friction when with_friction), clumping, collider plane, explicit
+ * constraints */
 GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
                                int i, int with_friction, const gr_normal_sums* acc) {
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
@@ -30,6 +31,7 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   float pen[GR_MAX_PLANES];
   if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
   if (g->plane) count += gr_gather_collider(g, prm, p, i, with_friction, pen, &sum);
+  if (g->con_offsets) count += gr_gather_constraints(g, prm, p, i, &sum);
   if (acc->pair || acc->collider) {
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {

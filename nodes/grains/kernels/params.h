@@ -29,6 +29,10 @@ typedef struct {
   float clumping_weight;
   float clumping_stiffness;
   float query_scale; /* neighbor_query_scale: clumping range in units of r_i + r_j */
+  /* explicit constraints; weight 0 = off (no adjacency: con_offsets null) */
+  float constraint_weight;
+  float constraint_stiffness;
+  int collide_constrained; /* collide_mutually_constrained_particles */
   /* averaging */
   float over_relaxation;
   int disable_averaging;
@@ -57,6 +61,15 @@ typedef struct {
    * (m), unit normal, surface velocity (m/s); a zero normal ends the list. Null when there are
    * no colliders. */
   const GR_GLOBAL float* plane;
+  /* explicit constraints: row i of the adjacency lists i's constraints, other endpoint
+   * con_other[k] and primitive con_prim[k], k in [con_offsets[i], con_offsets[i + 1]), in
+   * primitive order. Null when the constraint weight is 0 or there are no constraints. */
+  const GR_GLOBAL gr_uint* con_offsets;       /* (n + 1) */
+  const GR_GLOBAL gr_uint* con_other;         /* (2 m) */
+  const GR_GLOBAL gr_uint* con_prim;          /* (2 m) */
+  const GR_GLOBAL float* restlength;          /* (m) m, per primitive */
+  const GR_GLOBAL float* constraintweight;    /* (n) optional */
+  const GR_GLOBAL float* constraintstiffness; /* (n) optional */
 } gr_grains;
 
 #endif /* GRAINS_KERNELS_PARAMS_H */

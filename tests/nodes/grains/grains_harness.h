@@ -2,6 +2,7 @@
 // (force = mass * g, as the POP solver's force nodes would write it), collider states whose
 // poses advance with the substeps, and a loop that calls GrainsSolver::substep.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -62,6 +63,12 @@ inline ColliderState box(const Vec3& centre, const Vec3& size) {
 struct Scene {
   std::vector<float> P, v, force, mass, pscale, shockmass;
   std::vector<float> friction;  // optional, empty = missing
+  // explicit constraints: (m x 2) grain indices with per-primitive attributes; primitives the
+  // solver marks dead (broken, strands) are removed after each substep, as the node does
+  std::vector<int32_t> prims;
+  std::vector<float> restlength, strength, strain;
+  std::vector<float> constraintweight;  // optional, empty = missing
+  size_t removed = 0;                   // primitives removed so far
   std::vector<ColliderState> colliders;
   // collider motion: the pose of collider c at time t (unset = static)
   std::vector<std::function<Pose(float)>> collider_motion;
@@ -71,6 +78,7 @@ struct Scene {
   std::vector<Vec3> extra_force;  // per grain, added to mass * gravity (optional)
   float time = 0;
   GrainsStats stats;
+  std::vector<uint8_t> dead;
 
   size_t size() const { return mass.size(); }
   size_t add(const Vec3& p, float r, float m = 1.0f, const Vec3& vel = {0, 0, 0}) {
@@ -82,6 +90,15 @@ struct Scene {
     shockmass.push_back(0);
     return mass.size() - 1;
   }
+  // a constraint between a and b; rest length = their distance now unless given
+  size_t connect(size_t a, size_t b, float rest = -1, float str = 1) {
+    prims.insert(prims.end(), {static_cast<int32_t>(a), static_cast<int32_t>(b)});
+    restlength.push_back(rest >= 0 ? rest : length(pos(a) - pos(b)));
+    strength.push_back(str);
+    strain.push_back(0);
+    return restlength.size() - 1;
+  }
+  size_t prim_count() const { return restlength.size(); }
   Vec3 pos(size_t i) const { return {P[3 * i], P[3 * i + 1], P[3 * i + 2]}; }
   Vec3 vel(size_t i) const { return {v[3 * i], v[3 * i + 1], v[3 * i + 2]}; }
   void set_vel(size_t i, const Vec3& u) {
@@ -104,6 +121,14 @@ struct Scene {
     d.pscale = pscale.data();
     d.friction = friction.empty() ? nullptr : friction.data();
     d.shockmass = shockmass.data();
+    d.prim_count = prim_count();
+    d.prim_points = prims.data();
+    d.restlength = restlength.data();
+    d.strength = strength.data();
+    d.strain = strain.data();
+    dead.assign(prim_count(), 0);
+    d.prim_dead = dead.data();
+    d.constraintweight = constraintweight.empty() ? nullptr : constraintweight.data();
     return d;
   }
 
@@ -124,11 +149,34 @@ struct Scene {
     }
     GrainsData d = data();
     solver.substep(d, s, colliders.data(), colliders.size(), &stats);
+    remove_dead();
     time += s.dt;
   }
   void run(float seconds) {
     int steps = static_cast<int>(std::lround(seconds / s.dt));
     for (int k = 0; k < steps; ++k) substep();
+  }
+  void remove_dead() {
+    size_t kept = 0;
+    for (size_t q = 0; q < prim_count(); ++q) {
+      if (dead[q]) continue;
+      prims[2 * kept] = prims[2 * q];
+      prims[2 * kept + 1] = prims[2 * q + 1];
+      restlength[kept] = restlength[q];
+      strength[kept] = strength[q];
+      strain[kept] = strain[q];
+      ++kept;
+    }
+    removed += prim_count() - kept;
+    prims.resize(2 * kept);
+    restlength.resize(kept);
+    strength.resize(kept);
+    strain.resize(kept);
+  }
+  float max_abs_strain() const {
+    float m = 0;
+    for (float e : strain) m = std::max(m, std::fabs(e));
+    return m;
   }
   float max_y() const {
     float m = -1e30f;

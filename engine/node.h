@@ -31,6 +31,15 @@ struct CookStats {
   float max_strain = 0;
 };
 
+// Momentum the particles gave one collider during the current frame (two-way coupling, help page
+// "Enable Collision Feedback"): the opposite of what the collider gave them. Nodes add to it;
+// the evaluator clears it at the start of each frame and FrameWriter writes it as the frame's
+// mean force and torque (impulse / frame length) to colliders.csv.
+struct ColliderFeedback {
+  Vec3 impulse;          // N s
+  Vec3 angular_impulse;  // N m s, about the collider's translate (its pose's origin)
+};
+
 struct CookContext {
   ParticleStore& pts;
   const ParamSet& params;
@@ -46,6 +55,13 @@ struct CookContext {
   std::string node_name;
   std::string base_dir;  // folder of the graph file, for relative paths
   CookStats* stats = nullptr;
+  // Per collider (same order as `colliders`), for enable_collision_feedback; a node that adds to
+  // it also sets *feedback_on so the frame's row is written.
+  std::vector<ColliderFeedback>* feedback = nullptr;
+  bool* feedback_on = nullptr;
+  // The variables `params` were evaluated with (start of the substep), so a node can evaluate a
+  // copy of its parameters at another moment (the target node poses at the substep's end).
+  const ExprVars* vars = nullptr;
 };
 
 class Node {

@@ -126,6 +126,8 @@ void Simulation::step_object(SimObject& obj) {
   time.dt = 1.0 / (graph_.fps * substeps);
   CookStats stats;
   std::vector<uint32_t> members;
+  obj.feedback.assign(obj.collider_nodes.size(), ColliderFeedback{});
+  obj.feedback_on = false;
 
   for (int s = 0; s < substeps; ++s) {
     time.substep = s;
@@ -137,7 +139,8 @@ void Simulation::step_object(SimObject& obj) {
 
     for (auto& c : obj.chain) {
       const NodeDesc& d = graph_.nodes[c.node];
-      if (&c != &solver_entry) c.params.evaluate(vars_for(obj, c.node, time.st));
+      ExprVars vars = vars_for(obj, c.node, time.st);
+      if (&c != &solver_entry) c.params.evaluate(vars);
       if (!c.impl) continue;
       // members: the points of this node's streams (every point when it has none)
       members.clear();
@@ -163,13 +166,22 @@ void Simulation::step_object(SimObject& obj) {
                       graph_.seed * 1000003ULL + static_cast<uint64_t>(c.node),
                       d.name,
                       graph_.base_dir,
-                      &stats};
+                      &stats,
+                      &obj.feedback,
+                      &obj.feedback_on,
+                      &vars};
       c.impl->cook(ctx);
     }
   }
   obj.stats = FrameStats{};
   obj.stats.max_penetration = stats.max_penetration;
   obj.stats.mean_penetration = stats.mean_penetration;
+  // feedback: the frame's impulse over the frame's length is its mean force
+  if (obj.feedback_on)
+    for (size_t k = 0; k < obj.feedback.size(); ++k)
+      obj.stats.colliders.push_back({graph_.nodes[obj.collider_nodes[k]].name,
+                                     obj.feedback[k].impulse * static_cast<float>(graph_.fps),
+                                     obj.feedback[k].angular_impulse * static_cast<float>(graph_.fps)});
 }
 
 void Simulation::step_frame() {
@@ -247,6 +259,7 @@ FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, b
       "kinetic_energy\n",
       f);
   std::fclose(f);
+  std::filesystem::remove(dir_ + "/colliders.csv");  // written from the first frame with feedback
 }
 
 void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s, bool ply) {
@@ -264,6 +277,16 @@ void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s
   std::fprintf(f, "%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g\n", s.frame, s.time, s.points,
                s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration, s.max_strain,
                s.kinetic_energy);
+  std::fclose(f);
+  if (s.colliders.empty()) return;
+  path = dir_ + "/colliders.csv";
+  bool fresh = !std::filesystem::exists(path);
+  f = std::fopen(path.c_str(), fresh ? "w" : "a");
+  if (!f) throw GeometryError(path + ": cannot write");
+  if (fresh) std::fputs("frame,time,collider,fx,fy,fz,tx,ty,tz\n", f);
+  for (const auto& c : s.colliders)
+    std::fprintf(f, "%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
+                 c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
   std::fclose(f);
 }
 

@@ -27,6 +27,13 @@ struct FrameStats {
   float mean_penetration = 0;  // mean over overlapping pairs
   float max_strain = 0;        // max |strain| over constraints
   double kinetic_energy = 0;   // sum of m v^2 / 2 (J)
+  // collision feedback (enable_collision_feedback): the frame's mean force (N) and torque (N m,
+  // about the collider's translate) on each collider; empty when no node reported any
+  struct ColliderForce {
+    std::string name;
+    Vec3 force, torque;
+  };
+  std::vector<ColliderForce> colliders;
 };
 
 // One chain entry: a node instance with its parameters, evaluated per substep.
@@ -47,6 +54,8 @@ struct SimObject {
   std::vector<ParamSet> collider_params;
   std::vector<ColliderState> colliders;
   bool colliders_posed = false;
+  std::vector<ColliderFeedback> feedback;  // per collider, this frame (see ColliderFeedback)
+  bool feedback_on = false;
   FrameStats stats;
 };
 
@@ -81,7 +90,8 @@ class Simulation {
 // Computes the per-frame diagnostics of an object's points (penetration, energy, strain).
 void measure_frame(const ParticleStore& pts, FrameStats& stats);
 
-// Writes frames and stats.csv (DESIGN §6) into one folder.
+// Writes frames and stats.csv (DESIGN §6) into one folder, and colliders.csv
+// (frame,time,collider,fx,fy,fz,tx,ty,tz) for frames with collision feedback.
 class FrameWriter {
  public:
   FrameWriter(std::string dir, std::vector<std::string> attributes, bool all_attributes = false);

@@ -13,5 +13,6 @@ void register_builtin_nodes() {
   register_collider_node();
   register_solver_node();
   register_grains_node();
+  register_target_node();
 }
 }  // namespace grains

@@ -13,4 +13,5 @@ void register_kill_node();
 void register_collider_node();
 void register_solver_node();
 void register_grains_node();
+void register_target_node();
 }  // namespace grains

@@ -1,7 +1,20 @@
 // grains: the POP Grains node. Gathers the points of its stream (and group) into compact arrays,
 // runs one PBD substep (solver.h) and scatters P and v back, marking the points ispbd = 1 so the
 // solver leaves them alone. Parameter names are the help page's labels in snake_case.
+//
+// Impact data (add_impact_data), per point, for the frame (reset at its first substep):
+//   impact         int   1 when the grain touched a collider during the frame
+//   impactimpulse  float N s, the summed normal impulse the colliders gave it over the frame's
+//                  substeps: m x (its velocity change due to the collider) . n
+//   impactP        vec   m, the contact point of the strongest substep contact
+//   impactN        vec   unit, that contact's normal (out of the collider)
+//   impactother    int   that contact's collider index (the solver's `colliders` order);
+//                  grain-grain contacts are not recorded (reserved: -1 - id of the other grain)
+// Collision feedback (enable_collision_feedback): each collider receives the opposite of the
+// momentum it gave the grains, and the angular impulse (x_contact - collider translate) x that,
+// accumulated over the frame (engine ColliderFeedback -> DIR/colliders.csv).
 #include <cmath>
+#include <unordered_map>
 
 #include "engine/node.h"
 #include "nodes/grains/solver.h"
@@ -50,10 +63,52 @@ class GrainsNode : public Node {
       shock_.assign(n, 1.0f);
       d.shockmass = shock_.data();
     }
-    if (st.constraint_weight > 0) gather_constraints(s, d);
+    // explicit constraints, and rigid shape matching's connectivity: the gathered primitives
+    if (st.constraint_weight > 0 || st.rigid_shape_matching) gather_constraints(s, d);
+    if (st.rigid_shape_matching) {
+      ids_.resize(n);
+      const int32_t* id = s.i_if("id");
+      for (size_t k = 0; k < n; ++k) ids_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
+      d.id = ids_.data();
+    }
+    // pins: only with a targetstiffness attribute (missing = no pin) and nonzero parameters
+    if (st.target_weight > 0 && st.target_stiffness > 0 && s.f_if("targetstiffness")) {
+      d.targetstiffness = optional(s, "targetstiffness", ts_);
+      d.targetweight = optional(s, "targetweight", tw_);
+      if (const float* tp = s.v3_if("targetP"))
+        gather3(tp, tp_);
+      else
+        tp_.assign(3 * n, 0.0f);  // the attribute's default: the origin
+      d.targetP = tp_.data();
+    }
+    const bool impacts = p.b("add_impact_data"), feedback = p.b("enable_collision_feedback");
+    const size_t K = GrainsSolver::kContactSlots;
+    if ((impacts || feedback) && !ctx.colliders.empty()) {
+      imp_j_.assign(3 * K * n, 0.0f);
+      imp_x_.assign(3 * K * n, 0.0f);
+      imp_n_.assign(3 * K * n, 0.0f);
+      imp_c_.assign(K * n, -1);
+      d.impact_impulse = imp_j_.data();
+      d.impact_point = imp_x_.data();
+      d.impact_normal = imp_n_.data();
+      d.impact_collider = imp_c_.data();
+    }
     GrainsStats stats;
     solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), &stats);
     if (d.prim_count > 0) scatter_constraints(s);
+    if (impacts) write_impacts(ctx, d);
+    if (feedback && d.impact_collider && ctx.feedback && ctx.feedback->size() == ctx.colliders.size()) {
+      // serial, in grain and slot order: the same sums for any thread count
+      for (size_t e = 0; e < K * n; ++e) {
+        int32_t c = imp_c_[e];
+        if (c < 0) continue;
+        Vec3 j = load3(imp_j_.data(), e) * -1.0f;  // on the collider: the opposite
+        ColliderFeedback& fb = (*ctx.feedback)[c];
+        fb.impulse += j;
+        fb.angular_impulse += cross(load3(imp_x_.data(), e) - ctx.colliders[c].pose.t, j);
+      }
+      if (ctx.feedback_on) *ctx.feedback_on = true;
+    }
 
     float* P = s.v3("P");
     float* v = s.v3("v");
@@ -113,6 +168,9 @@ class GrainsNode : public Node {
     st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
     st.final_collision_test = p.b("final_collision_test");
     st.disable_constraint_averaging = p.b("disable_constraint_averaging");
+    st.target_weight = static_cast<float>(p.f("target_weight"));
+    st.target_stiffness = static_cast<float>(p.f("target_stiffness"));
+    st.rigid_shape_matching = p.b("enable_rigid_shape_matching");
     return st;
   }
 
@@ -176,6 +234,46 @@ class GrainsNode : public Node {
     s.remove_prims(dead);
   }
 
+  // Impact attributes (see the top of the file): cleared at the frame's first substep, then the
+  // normal impulse adds up and the strongest substep contact names the point, normal and other.
+  void write_impacts(CookContext& ctx, const GrainsData& d) {
+    ParticleStore& s = ctx.pts;
+    int32_t* hit = s.i("impact");
+    float* J = s.f("impactimpulse");
+    float* X = s.v3("impactP");
+    float* N = s.v3("impactN");
+    int32_t* other = s.i("impactother");
+    const int32_t* id = s.i_if("id");
+    if (ctx.time.substep == 0) {
+      strongest_.clear();
+      for (uint32_t i : idx_) {
+        hit[i] = 0;
+        J[i] = 0;
+        other[i] = -1;
+        store3(X, i, Vec3{});
+        store3(N, i, Vec3{});
+      }
+    }
+    if (!d.impact_collider) return;
+    const size_t K = GrainsSolver::kContactSlots;
+    for (size_t e = 0; e < K * idx_.size(); ++e) {
+      int32_t c = imp_c_[e];
+      if (c < 0) continue;
+      uint32_t i = idx_[e / K];
+      Vec3 n = load3(imp_n_.data(), e);
+      float jn = dot(load3(imp_j_.data(), e), n);
+      hit[i] = 1;
+      J[i] += jn;
+      float& best = strongest_[id ? id[i] : static_cast<int32_t>(i)];
+      if (other[i] < 0 || jn > best) {
+        best = jn;
+        other[i] = c;
+        store3(X, i, load3(imp_x_.data(), e));
+        store3(N, i, n);
+      }
+    }
+  }
+
   void gather3(const float* a, std::vector<float>& out) const {
     out.resize(3 * idx_.size());
     for (size_t k = 0; k < idx_.size(); ++k) store3(out.data(), k, load3(a, idx_[k]));
@@ -200,6 +298,11 @@ class GrainsNode : public Node {
   std::vector<uint32_t> prims_;
   std::vector<float> rest_, strength_, strain_, cw_, cs_;
   std::vector<uint8_t> dead_;
+  std::vector<float> tp_, tw_, ts_;                 // pins
+  std::vector<int32_t> ids_;                        // shape matching: point ids
+  std::vector<float> imp_j_, imp_x_, imp_n_;        // collider contacts of the substep
+  std::vector<int32_t> imp_c_;
+  std::unordered_map<int32_t, float> strongest_;    // id -> strongest normal impulse this frame
 };
 
 }  // namespace
@@ -207,7 +310,7 @@ class GrainsNode : public Node {
 void register_grains_node() {
   NodeTypeInfo t;
   t.type = "grains";
-  t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping, explicit constraints).";
+  t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping, explicit constraints, pins, rigid shape matching, impact data, collision feedback).";
   t.params = {
       ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
       ParamDecl::String("group", "", "act only on this point group of the stream (empty: the whole stream)"),
@@ -265,6 +368,16 @@ void register_grains_node() {
       ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),
       ParamDecl::Toggle("final_collision_test", true, "a swept collision pass after the loop: no leaks through thin or moving colliders"),
       ParamDecl::Toggle("disable_constraint_averaging", false, "sum corrections instead of averaging them (momentum-preserving)"),
+      ParamDecl::Float("target_weight", 1, "weight of the pull toward targetP; 0 disables pins")
+          .range(0, 2).scaled_by("targetweight"),
+      ParamDecl::Float("target_stiffness", 1000, "stiffness of pins; full at substeps x iterations; no targetstiffness attribute = no pin")
+          .at_least(0).scaled_by("targetstiffness"),
+      ParamDecl::Toggle("enable_rigid_shape_matching", false,
+                        "keep each connected component (grains joined by 2-point primitives) a best-fit rigid placement of its rest shape"),
+      ParamDecl::Toggle("add_impact_data", false,
+                        "write impact, impactP, impactN, impactimpulse (N s), impactother (collider index) for collider contacts"),
+      ParamDecl::Toggle("enable_collision_feedback", false,
+                        "accumulate the force and torque the grains put on each collider (DIR/colliders.csv)"),
   };
   t.make = [] { return std::make_unique<GrainsNode>(); };
   register_node_type(std::move(t));

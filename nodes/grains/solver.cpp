@@ -6,8 +6,14 @@
 //      per grain (the nearest collider within range), once, or every iteration when asked
 //   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h);
 //      without accurate_friction one friction-only pass follows the loop
+//      (pins gather with the rest). Rigid shape matching is its own constraint group, projected
+//      after each iteration's averaged update (Gauss-Seidel across groups, Jacobi within one,
+//      as Macklin et al. 2014 Alg. 1): averaged in with a grain's contacts, a goal would pull
+//      only 1/count of the way and a landing cube deformed by 12% of its side; projected, the
+//      components are rigid after every iteration. Goals per component, with Eigen.
 //   4. v from the motion, blend and caps, drift (kernels/velocity.h); the final collision pass
-//      (swept, so thin and moving colliders hold); write P and v; stats.
+//      (swept, so thin and moving colliders hold); write P and v; collider impulses;
+//      stats.
 //   5. explicit constraints: strain from the end positions, breaking, remove strands (the caller
 //      removes the primitives marked dead).
 // Explicit constraints join the iterations through a per-grain adjacency (CSR rows of (other
@@ -19,6 +25,7 @@
 
 #include <omp.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -26,6 +33,7 @@
 
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/iterate.h"
+static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slots = planes");
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
 
@@ -69,6 +77,8 @@ gr_params make_params(const GrainsSettings& s) {
   k.max_acceleration = s.max_acceleration;
   k.max_speed = s.max_speed;
   k.drift_threshold = s.drift_threshold;
+  k.target_weight = s.target_weight;
+  k.target_stiffness = s.target_stiffness;
   return k;
 }
 
@@ -88,9 +98,10 @@ void remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocit
 //    or moving collider: the grain is put where the trace first reached distance r, carried by
 //    the collider to its end pose, and pushed out to r. The r/2 test keeps grains sliding along
 //    a surface at distance ~r from counting as hits.
-// Either way the velocity component into the collider is removed.
+// Either way the velocity component into the collider is removed. *hit receives the index of the
+// last collider that acted (unchanged when none did) and *hit_n its normal.
 void final_collision(const ColliderState* colliders, size_t collider_count, const Vec3& a,
-                     Vec3& b, Vec3& v, float r) {
+                     Vec3& b, Vec3& v, float r, int32_t* hit, Vec3* hit_n) {
   for (size_t c = 0; c < collider_count; ++c) {
     const ColliderState& col = colliders[c];
     Vec3 n;
@@ -98,6 +109,8 @@ void final_collision(const ColliderState* colliders, size_t collider_count, cons
     if (e < r) {
       b += n * (r - e);
       remove_inward_velocity(v, n, col.velocity_at(b));
+      *hit = static_cast<int32_t>(c);
+      *hit_n = n;
       continue;
     }
     float t_half = col.sweep(a, b, 0.5f * r);
@@ -109,7 +122,15 @@ void final_collision(const ColliderState* colliders, size_t collider_count, cons
     if (eh < r) h += n * (r - eh);
     b = h;
     remove_inward_velocity(v, n, col.velocity_at(b));
+    *hit = static_cast<int32_t>(c);
+    *hit_n = n;
   }
+}
+
+// Union-find root with path halving.
+int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
+  while (parent[a] != a) a = parent[a] = parent[parent[a]];
+  return a;
 }
 
 }  // namespace
@@ -209,6 +230,85 @@ void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, in
   if (stats) {
     stats->max_strain = max_strain;
     for (size_t p = 0; p < m; ++p) stats->broken += dead[p];
+  }
+}
+
+// Rigid shape matching goals (Müller et al. 2005, "Meshless deformations based on shape
+// matching"; pbd_research.md §1): per component with centre of mass c and rest offsets rbar_i,
+// A = sum_i m_i (p_i - c) rbar_i^T = R S (polar decomposition, R from the SVD A = U D V^T as
+// U V^T, a reflection flipped to a rotation), goal g_i = c + R rbar_i. Grains in no component
+// keep g_i = p_i. Parallel over components; each writes only its members.
+void GrainsSolver::shape_goals(const float* p, int threads) {
+  const long n = static_cast<long>(radius_.size());
+  float* goal = shape_goal_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < n; ++i) store3(goal, i, load3(p, i));
+  const long comps = static_cast<long>(comp_offsets_.size()) - 1;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (long c = 0; c < comps; ++c) {
+    const uint32_t b = comp_offsets_[c], e = comp_offsets_[c + 1];
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    double msum = 0;
+    for (uint32_t k = b; k < e; ++k) {
+      uint32_t i = comp_members_[k];
+      Vec3 x = load3(p, i);
+      centre += mass_[i] * Eigen::Vector3d(x.x, x.y, x.z);
+      msum += mass_[i];
+    }
+    centre /= msum;
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    for (uint32_t k = b; k < e; ++k) {
+      uint32_t i = comp_members_[k];
+      Vec3 x = load3(p, i), r = load3(rest_offset_.data(), i);
+      A += mass_[i] * (Eigen::Vector3d(x.x, x.y, x.z) - centre) *
+           Eigen::Vector3d(r.x, r.y, r.z).transpose();
+    }
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d U = svd.matrixU();
+    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
+    Eigen::Matrix3d R = U * svd.matrixV().transpose();
+    for (uint32_t k = b; k < e; ++k) {
+      uint32_t i = comp_members_[k];
+      Vec3 r = load3(rest_offset_.data(), i);
+      Eigen::Vector3d gi = centre + R * Eigen::Vector3d(r.x, r.y, r.z);
+      store3(goal, i, Vec3{static_cast<float>(gi.x()), static_cast<float>(gi.y()),
+                           static_cast<float>(gi.z())});
+    }
+  }
+}
+
+// Rigid shape matching as its own constraint group: every grain of a component moves to its goal
+// (others stay); then each component is translated out of its collider planes as a whole, by
+// the largest penetration along each axis among its members. Without that shift a body that
+// lands on a corner could only be pushed out through that corner grain's correction, diluted
+// over the component by the fit (1/N of it per iteration): it would sink, and the final
+// collision pass, grain by grain, would bend it (9% of the side for a 1,000-grain cube).
+void GrainsSolver::project_shapes(int threads) {
+  shape_goals(p_.data(), threads);
+  p_.swap(shape_goal_);
+  if (plane_.empty() || plane_collider_.size() != GR_MAX_PLANES * radius_.size()) return;
+  float* p = p_.data();
+  const long comps = static_cast<long>(comp_offsets_.size()) - 1;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (long c = 0; c < comps; ++c) {
+    Vec3 up, down;  // the largest positive and negative shift per axis
+    for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
+      uint32_t i = comp_members_[k];
+      for (int q = 0; q < GR_MAX_PLANES; ++q) {
+        if (plane_collider_[GR_MAX_PLANES * i + q] < 0) break;
+        const float* pl = plane_.data() + 9 * (GR_MAX_PLANES * i + q);
+        Vec3 xs = load3(pl, 0), nrm = load3(pl, 1);
+        float d = radius_[i] - dot(load3(p, i) - xs, nrm);
+        if (!(d > 0)) continue;
+        Vec3 m = nrm * d;
+        up = {std::max(up.x, m.x), std::max(up.y, m.y), std::max(up.z, m.z)};
+        down = {std::min(down.x, m.x), std::min(down.y, m.y), std::min(down.z, m.z)};
+      }
+    }
+    Vec3 shift = up + down;
+    if (shift.x == 0 && shift.y == 0 && shift.z == 0) continue;
+    for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
+      store3(p, comp_members_[k], load3(p, comp_members_[k]) + shift);
   }
 }
 
@@ -312,6 +412,71 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   g.repulsionstiffness = d.repulsionstiffness;
   g.attractionweight = d.attractionweight;
   g.attractionstiffness = d.attractionstiffness;
+  // pins: off (costs nothing) without targetstiffness or with weight or stiffness 0
+  if (d.targetstiffness && d.targetP && s.target_weight > 0 && s.target_stiffness > 0) {
+    g.targetP = d.targetP;
+    g.targetweight = d.targetweight;
+    g.targetstiffness = d.targetstiffness;
+  }
+
+  // rigid shape matching: connected components of the 2-point primitives (union-find) and their
+  // rest shapes, rebuilt from the start-of-substep positions whenever the grains or the
+  // primitives change (first seen, births, deaths, broken constraints); otherwise the stored rest
+  // offsets are kept
+  const bool shapes_on = s.rigid_shape_matching && d.prim_points && d.prim_count > 0;
+  if (shapes_on) {
+    std::vector<int32_t> key;
+    key.reserve(1 + n + 2 * d.prim_count);
+    key.push_back(static_cast<int32_t>(n));
+    for (size_t i = 0; i < n; ++i) key.push_back(d.id ? d.id[i] : static_cast<int32_t>(i));
+    for (size_t e = 0; e < 2 * d.prim_count; ++e) {
+      int32_t a = d.prim_points[e];
+      key.push_back(a >= 0 && static_cast<size_t>(a) < n ? key[1 + a] : -1);
+    }
+    if (key != shape_key_) {
+      shape_key_.swap(key);
+      std::vector<int32_t> parent(n);
+      for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
+      for (size_t e = 0; e < d.prim_count; ++e) {
+        int32_t a = d.prim_points[2 * e], b = d.prim_points[2 * e + 1];
+        if (a < 0 || b < 0 || static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n) continue;
+        a = find_root(parent, a);
+        b = find_root(parent, b);
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      }
+      // components in order of their smallest grain; singletons are left out
+      std::vector<uint32_t> size(n, 0);
+      for (size_t i = 0; i < n; ++i) size[find_root(parent, static_cast<int32_t>(i))]++;
+      std::vector<int32_t> slot(n, -1);
+      comp_offsets_.assign(1, 0);
+      for (size_t i = 0; i < n; ++i)
+        if (parent[i] == static_cast<int32_t>(i) && size[i] > 1) {
+          slot[i] = static_cast<int32_t>(comp_offsets_.size()) - 1;
+          comp_offsets_.push_back(comp_offsets_.back() + size[i]);
+        }
+      comp_members_.resize(comp_offsets_.back());
+      std::vector<uint32_t> fill(comp_offsets_.begin(), comp_offsets_.end() - 1);
+      for (size_t i = 0; i < n; ++i) {
+        int32_t c = slot[find_root(parent, static_cast<int32_t>(i))];
+        if (c >= 0) comp_members_[fill[c]++] = static_cast<uint32_t>(i);
+      }
+      // rest offsets from the mass-weighted centre of each component
+      rest_offset_.assign(3 * n, 0.0f);
+      for (size_t c = 0; c + 1 < comp_offsets_.size(); ++c) {
+        Vec3 centre;
+        double msum = 0;
+        for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
+          uint32_t i = comp_members_[k];
+          centre += load3(d.P, i) * mass_[i];
+          msum += mass_[i];
+        }
+        centre = centre / static_cast<float>(msum);
+        for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
+          store3(rest_offset_.data(), comp_members_[k], load3(d.P, comp_members_[k]) - centre);
+      }
+    }
+    shape_goal_.resize(3 * n);
+  }
 
   // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
   const bool constraints_on =
@@ -338,7 +503,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       !s.accurate_friction && pairs_on && s.repulsion_weight > 0 && s.friction_with_particles > 0;
   const bool collider_friction_pass =
       !s.accurate_friction && colliders_on && s.friction_with_colliders > 0;
-  gr_normal_sums acc{nullptr, nullptr, nullptr};
+  gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr};
+  const bool impacts = d.impact_impulse && colliders_on;
+  if (impacts) {
+    collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
+    acc.collider_dx = collider_dx_.data();
+  }
   if (collider_friction_pass) {
     collider_normal_.assign(GR_MAX_PLANES * n, 0.0f);
     acc.collider = collider_normal_.data();
@@ -410,6 +580,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &acc));
     }
     p_.swap(p_next_);
+    if (shapes_on) project_shapes(threads);
   }
   if (pair_friction_pass || collider_friction_pass) {
     const float* p = p_.data();
@@ -420,6 +591,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
     }
     p_.swap(p_next_);
+    if (shapes_on) project_shapes(threads);  // friction moved grains one by one
   }
 
   // 4. velocity, drift, final collisions; write P and v
@@ -432,9 +604,37 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       gr_float3 Pk, vk;
       gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
       Vec3 b = to_vec(Pk), v = to_vec(vk);
-      if (final_test) final_collision(colliders, collider_count, load3(P0_.data(), i), b, v, radius_[i]);
+      const Vec3 v_loop = v;
+      int32_t hit = -1;
+      Vec3 hit_n;
+      if (final_test)
+        final_collision(colliders, collider_count, load3(P0_.data(), i), b, v, radius_[i], &hit, &hit_n);
       store3(d.P, i, b);
       store3(d.v, i, v);
+      if (!impacts) continue;
+      // Momentum from each collider plane: its applied corrections dx_c moved the grain, and
+      // v = (p - P) / dt turns a displacement into a velocity change dx_c / dt; the final pass
+      // changes v directly (added to its collider's slot, or a free one). Blend and caps, which
+      // act on v after the loop, are not counted.
+      const int K = GR_MAX_PLANES;
+      const int32_t* pc = plane_collider_.data() + K * i;
+      int hit_slot = -1;
+      for (int q = 0; q < K; ++q) {
+        const size_t slot = K * i + q;
+        const int32_t c = pc[q];
+        Vec3 dv = c >= 0 ? load3(collider_dx_.data(), slot) / s.dt : Vec3{};
+        Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * slot, 1) : Vec3{};
+        if (hit >= 0 && hit_slot < 0 && (c == hit || c < 0)) {
+          hit_slot = q;
+          dv += v - v_loop;
+          if (c < 0) n_c = hit_n;
+        }
+        const bool any = !(dv.x == 0 && dv.y == 0 && dv.z == 0);
+        d.impact_collider[slot] = any ? (c >= 0 ? c : hit) : -1;
+        store3(d.impact_impulse, slot, any ? dv * mass_[i] : Vec3{});
+        store3(d.impact_normal, slot, n_c);
+        store3(d.impact_point, slot, b - n_c * radius_[i]);
+      }
     }
   }
 

@@ -72,6 +72,12 @@ struct GrainsSettings {
   bool update_neighbors_during_iterations = false;
   bool final_collision_test = true;
   bool disable_constraint_averaging = false;
+  // pins (help page "Targets (Pins)"): weight x targetweight, stiffness x targetstiffness
+  float target_weight = 1.0f;
+  float target_stiffness = 1000.0f;
+  // rigid shape matching: each connected component of GrainsData::edges keeps a best-fit rigid
+  // placement of its rest shape
+  bool rigid_shape_matching = false;
   int threads = 0;  // 0: OpenMP default
 };
 
@@ -100,6 +106,20 @@ struct GrainsData {
   uint8_t* prim_dead = nullptr;                 // (m) out: 1 = broken or a strand; may be nullptr
   const float* constraintweight = nullptr;      // (n) optional
   const float* constraintstiffness = nullptr;   // (n) optional
+  const int32_t* id = nullptr;  // (n) stable point ids (shape matching's rest shapes), optional
+  // pins: on when targetstiffness is set (a missing attribute = no pin, help page)
+  const float* targetP = nullptr;          // (n x 3) m; nullptr with targetstiffness: origin
+  const float* targetweight = nullptr;     // (n) optional
+  const float* targetstiffness = nullptr;  // (n) nullptr: no pins
+  // rigid shape matching: its connectivity is the 2-point primitives above (prim_points), dead
+  // ones included until they are removed
+  // collider contacts, out (impact data, collision feedback); all set or all nullptr. Each grain
+  // has kContactSlots slots (its collider planes; the final pass's hit adds to its collider's
+  // slot or takes a free one): (n x kContactSlots) entries.
+  float* impact_impulse = nullptr;  // (n x slots x 3) N s: momentum the grain got from the collider
+  float* impact_point = nullptr;    // (n x slots x 3) m: contact point on the collider surface
+  float* impact_normal = nullptr;   // (n x slots x 3) unit, out of the collider
+  int32_t* impact_collider = nullptr;  // (n x slots) collider index, -1: empty slot
 };
 
 // Per-substep diagnostics.
@@ -113,12 +133,15 @@ struct GrainsStats {
 
 class GrainsSolver {
  public:
+  static constexpr int kContactSlots = 4;  // = GR_MAX_PLANES (checked in solver.cpp)
   void substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                size_t collider_count, GrainsStats* stats = nullptr);
 
  private:
   void build_constraints(const GrainsData& d);
   void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
+  void shape_goals(const float* p, int threads);
+  void project_shapes(int threads);
   void find_planes(const float* P, const float* p, const ColliderState* colliders,
                    size_t collider_count, float query_scale, int threads);
 
@@ -142,6 +165,13 @@ class GrainsSolver {
   std::vector<uint32_t> con_other_, con_prim_;  // (2 m)
   std::vector<uint32_t> degree_;           // (n) scratch: constraint degree (remove strands)
   std::vector<uint8_t> dead_;              // (m) scratch when the caller gives no prim_dead
+  std::vector<float> collider_dx_;  // (n x GR_MAX_PLANES x 3) m: applied collider corrections
+  // rigid shape matching: components of the edge graph, rest offsets, per-iteration goals
+  std::vector<int32_t> shape_key_;     // ids then edges (as ids) the rest shapes were built for
+  std::vector<uint32_t> comp_offsets_;  // (components + 1) rows into comp_members_
+  std::vector<uint32_t> comp_members_;  // grains of each component (components of 2 or more)
+  std::vector<float> rest_offset_;      // (n x 3) m: rbar_i, i's rest offset from its centre
+  std::vector<float> shape_goal_;       // (n x 3) m: goal c + R rbar_i this iteration
 };
 
 }  // namespace grains

@@ -48,9 +48,13 @@ struct Outcome {
   size_t points = 0;
   std::vector<int32_t> prims;  // the constraints' endpoints
   std::vector<float> strain;
+  // every other point attribute (impact data, targetP, ...) and the collision feedback
+  std::map<std::string, std::vector<float>> floats;
+  std::map<std::string, std::vector<int32_t>> ints;
+  std::vector<float> feedback;
   bool operator==(const Outcome& o) const {
     return P == o.P && v == o.v && groups == o.groups && points == o.points && prims == o.prims &&
-           strain == o.strain;
+           strain == o.strain && floats == o.floats && ints == o.ints && feedback == o.feedback;
   }
 };
 
@@ -63,10 +67,15 @@ Outcome run(const json& graph, int frames) {
   o.points = pts.size();
   o.P = pts.find("P")->f;
   o.v = pts.find("v")->f;
-  for (const auto& [name, a] : pts.attributes())
+  for (const auto& [name, a] : pts.attributes()) {
     if (name.rfind("group_", 0) == 0) o.groups[name] = a.i;
+    if (a.type == AttribType::Int) o.ints[name] = a.i;
+    else o.floats[name] = a.f;
+  }
   o.prims = pts.prim_points();
   if (const float* e = pts.prim_f_if("strain")) o.strain.assign(e, e + pts.prim_count());
+  for (const auto& c : sim.object(0).stats.colliders)
+    o.feedback.insert(o.feedback.end(), {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z});
   return o;
 }
 
@@ -124,12 +133,44 @@ std::map<std::string, Scene> scenes() {
     json fine = heap_source(0.05);
     fine["name"] = "fine";
     fine["params"]["center"] = {0.1, 0.9, 0};
-    return base_graph({heap_source(), fine,
-                       {{"name", "m"}, {"type", "merge"}, {"inputs", {"src", "fine"}}},
-                       {{"name", "g"}, {"type", "force"}, {"inputs", {"m"}},
+    // pins need a targetstiffness attribute: a target node (lifting the targets 0.3 m) joins
+    // the chain when the pin parameters are authored, in both runs of the comparison
+    const bool pins = p.contains("target_weight") || p.contains("target_stiffness");
+    // shape matching needs primitives: a plate of grains joined by edges joins the heap
+    const bool plate = p.contains("enable_rigid_shape_matching");
+    json merge_inputs = {"src", "fine"};
+    json nodes = {heap_source(), fine};
+    if (plate) {
+      nodes.push_back({{"name", "plate"}, {"type", "source"},
+                       {"params", {{"shape", "file"}, {"file", "data/rigid_plate.ply"}, {"separation", 0.1},
+                                   {"velocity", {0, -1, 0}}}}});
+      merge_inputs.push_back("plate");
+    }
+    nodes.push_back({{"name", "m"}, {"type", "merge"}, {"inputs", merge_inputs}});
+    nodes.push_back({{"name", "g"}, {"type", "force"}, {"inputs", {"m"}},
+                     {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}});
+    if (pins) {
+      nodes.push_back({{"name", "t"}, {"type", "target"}, {"inputs", {"g"}},
+                       {"params", {{"translate", {0, 0.3, 0}}, {"stiffness", 0.01}}}});
+      n["inputs"] = {"t"};
+    }
+    nodes.push_back(n);
+    nodes.push_back(ground());
+    nodes.push_back({{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                     {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}});
+    return base_graph(nodes);
+  };
+  s["target"] = [](const json& p) {
+    json n = {{"name", "n"}, {"type", "target"}, {"inputs", {"g"}}, {"params", json::object()}};
+    n["params"].update(p);
+    return base_graph({heap_source(),
+                       {{"name", "g"}, {"type", "force"}, {"inputs", {"src"}},
                         {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
-                       n, ground(),
-                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                       n,
+                       {{"name", "gr"}, {"type", "grains"}, {"inputs", {"n"}},
+                        {"params", {{"target_stiffness", 10}, {"constraint_iterations", 6}}}},
+                       ground(),
+                       {{"name", "s"}, {"type", "solver"}, {"inputs", {"gr"}},
                         {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
   };
   // explicit constraints: a connected sheet of overlapping grains (pscale 0.06 at 0.1 m) dropped
@@ -254,6 +295,17 @@ std::map<std::string, Special> specials() {
       {"source.connect_radius", {json::object(), 1.5}},
       {"source.threshold",
        {{{"shape", "image"}, {"file", "data/mask_half.png"}, {"size", {1.9, 0, 0.9}}}, 1.0}},
+      // pins: the scene adds a target node when these are authored (see scenes())
+      {"grains.target_weight", {{{"target_weight", 1}, {"target_stiffness", 1000}}, 0.3}},
+      {"grains.target_stiffness", {{{"target_weight", 1}, {"target_stiffness", 1000}}, 300}},
+      // the scene adds a plate of grains joined by edges when this is authored
+      {"grains.enable_rigid_shape_matching", {{{"enable_rigid_shape_matching", false}}, true}},
+      // target
+      {"target.activation", {json::object(), 0}},
+      {"target.group", {json::object(), "nobody"}},
+      {"target.mode", {{{"file", "data/target_cube.obj"}}, "surface"}},
+      {"target.file", {{{"mode", "surface"}, {"file", "data/target_cube.obj"}}, "data/target_tetra.obj"}},
+      {"target.pivot", {{{"rotate", {0, 30, 0}}}, json::array({0.3, 0.5, 0.7})}},
   };
 }
 

@@ -7,6 +7,7 @@
 #ifndef GRAINS_KERNELS_ITERATE_H
 #define GRAINS_KERNELS_ITERATE_H
 #include "collider.h"
+#include "pin.h"
 
 /* Accumulated contact overlaps for the friction pass after the loop (accurate_friction off);
  * all null when not needed. */
@@ -14,6 +15,11 @@ typedef struct {
   GR_GLOBAL float* pair_iteration; /* (neighbour entries) overlap this iteration, scratch */
   GR_GLOBAL float* pair;           /* (neighbour entries) sum over iterations of overlap / n_i */
   GR_GLOBAL float* collider;       /* (n x GR_MAX_PLANES) the same for the collider planes */
+  /* (n x GR_MAX_PLANES x 3) m: each collider plane's share of i's applied corrections, summed
+   * over the iterations (impact data and collision feedback), or null. The collider part of a
+   * grain's corrections is split among its planes in proportion to their overlaps (exact for
+   * one plane, the common case). */
+  GR_GLOBAL float* collider_dx;
 } gr_normal_sums;
 
 GR_INLINE gr_float3 gr_average(gr_float3 p, gr_float3 sum, int count, float omega,
@@ -22,16 +28,43 @@ GR_INLINE gr_float3 gr_average(gr_float3 p, gr_float3 sum, int count, float omeg
   return gr_madd(p, sum, disable_averaging ? omega : omega / (float)count);
 }
 
-/* constraint loop: contacts (+ friction when with_friction), clumping, collider plane, explicit
- * constraints */
+/* the factor the averaged sum is applied with */
+GR_INLINE float gr_average_factor(int count, float omega, int disable_averaging) {
+  if (count == 0) return 0.0f;
+  return disable_averaging ? omega : omega / (float)count;
+}
+
+/* adds the applied collider correction csum * f to i's planes, split by the weights w[k] */
+GR_INLINE void gr_add_collider_dx(GR_GLOBAL float* collider_dx, int i, gr_float3 csum, float f,
+                                  const float* w) {
+  float total = 0.0f;
+  int k;
+  for (k = 0; k < GR_MAX_PLANES; ++k) total += w[k];
+  if (!(total > 0.0f)) return;
+  for (k = 0; k < GR_MAX_PLANES; ++k) {
+    if (!(w[k] > 0.0f)) continue;
+    int slot = GR_MAX_PLANES * i + k;
+    gr_store3(collider_dx, slot, gr_madd(gr_load3(collider_dx, slot), csum, f * w[k] / total));
+  }
+}
+
+/* constraint loop: contacts (+ friction when with_friction), clumping, collider planes,
+ * explicit constraints, pins */
 GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
                                int i, int with_friction, const gr_normal_sums* acc) {
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
-  int count = 0;
+  gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
+  int count = 0, ccount = 0;
   float pen[GR_MAX_PLANES];
   if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
-  if (g->plane) count += gr_gather_collider(g, prm, p, i, with_friction, pen, &sum);
+  if (g->plane) ccount = gr_gather_collider(g, prm, p, i, with_friction, pen, &csum);
+  count += ccount;
+  sum = gr_add(sum, csum);
   if (g->con_offsets) count += gr_gather_constraints(g, prm, p, i, &sum);
+  if (g->targetP) count += gr_gather_pin(g, prm, p, i, &sum);
+  if (acc->collider_dx && ccount)
+    gr_add_collider_dx(acc->collider_dx, i, csum,
+                       gr_average_factor(count, prm->over_relaxation, prm->disable_averaging), pen);
   if (acc->pair || acc->collider) {
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {
@@ -51,10 +84,19 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
 GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
                                      const GR_GLOBAL float* p, const gr_normal_sums* acc, int i) {
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
-  int count = 0;
+  gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
+  int count = 0, ccount = 0;
   if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
   if (acc->collider && g->plane)
-    count += gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &sum);
+    ccount = gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &csum);
+  count += ccount;
+  sum = gr_add(sum, csum);
+  if (acc->collider_dx && ccount) {
+    float w[GR_MAX_PLANES];
+    int k;
+    for (k = 0; k < GR_MAX_PLANES; ++k) w[k] = acc->collider[GR_MAX_PLANES * i + k];
+    gr_add_collider_dx(acc->collider_dx, i, csum, gr_average_factor(count, 1.0f, prm->disable_averaging), w);
+  }
   return gr_average(gr_load3(p, i), sum, count, 1.0f, prm->disable_averaging);
 }
 

@@ -41,6 +41,9 @@ typedef struct {
   float max_acceleration; /* m/s^2 */
   float max_speed;        /* m/s */
   float drift_threshold;  /* m/s */
+  /* pins; weight 0 or no targetstiffness attribute = off (targetP null) */
+  float target_weight;
+  float target_stiffness;
 } gr_params;
 
 typedef struct {
@@ -70,6 +73,10 @@ typedef struct {
   const GR_GLOBAL float* restlength;          /* (m) m, per primitive */
   const GR_GLOBAL float* constraintweight;    /* (n) optional */
   const GR_GLOBAL float* constraintstiffness; /* (n) optional */
+  /* pins: null when off. targetstiffness is required when targetP is set (missing = no pin) */
+  const GR_GLOBAL float* targetP;         /* (n x 3) m */
+  const GR_GLOBAL float* targetweight;    /* (n) optional */
+  const GR_GLOBAL float* targetstiffness; /* (n) */
 } gr_grains;
 
 #endif /* GRAINS_KERNELS_PARAMS_H */

@@ -69,6 +69,7 @@ struct Scene {
   std::vector<float> restlength, strength, strain;
   std::vector<float> constraintweight;  // optional, empty = missing
   size_t removed = 0;                   // primitives removed so far
+  std::vector<float> targetP, targetstiffness;  // pins, optional (empty targetstiffness = no pin)
   std::vector<ColliderState> colliders;
   // collider motion: the pose of collider c at time t (unset = static)
   std::vector<std::function<Pose(float)>> collider_motion;
@@ -82,9 +83,10 @@ struct Scene {
 
   size_t size() const { return mass.size(); }
   size_t add(const Vec3& p, float r, float m = 1.0f, const Vec3& vel = {0, 0, 0}) {
-    P.insert(P.end(), {p.x, p.y, p.z});
-    v.insert(v.end(), {vel.x, vel.y, vel.z});
-    force.insert(force.end(), {0, 0, 0});
+    // push_back, not insert({...}): GCC 12 warns falsely (-Wstringop-overflow) on the latter
+    for (float c : {p.x, p.y, p.z}) P.push_back(c);
+    for (float c : {vel.x, vel.y, vel.z}) v.push_back(c);
+    for (int c = 0; c < 3; ++c) force.push_back(0.0f);
     mass.push_back(m);
     pscale.push_back(r);
     shockmass.push_back(0);
@@ -129,6 +131,10 @@ struct Scene {
     dead.assign(prim_count(), 0);
     d.prim_dead = dead.data();
     d.constraintweight = constraintweight.empty() ? nullptr : constraintweight.data();
+    if (!targetstiffness.empty()) {
+      d.targetP = targetP.data();
+      d.targetstiffness = targetstiffness.data();
+    }
     return d;
   }
 

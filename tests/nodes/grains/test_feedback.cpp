@@ -1,0 +1,121 @@
+// Collision feedback and impact data (help page "Enable Collision Feedback", "Add Impact Data").
+// Both measure the momentum a collider gives a grain: its applied corrections dx_c over a substep
+// change the grain's velocity by dx_c / dt (v = (p - P) / dt), the final collision pass by the
+// velocity it removes; the collider receives the opposite.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "tests/nodes/grains/grains_harness.h"
+#include "tests/support/support.h"
+
+using namespace grains;
+using namespace grains::test;
+using json = nlohmann::json;
+
+namespace {
+
+Graph graph(const json& nodes) {
+  json g = {{"grains_graph", 1}, {"fps", 24}, {"frames", 48}, {"seed", 1}, {"nodes", nodes}};
+  return test::graph_from(g.dump(), test::source_dir() + "/tests/feedback.json");
+}
+
+json ground_node() {
+  return {{"name", "ground"}, {"type", "collider"}, {"params", {{"shape", "plane"}}}};
+}
+
+}  // namespace
+
+TEST_CASE("collision feedback: a resting pile presses on the ground with its weight", "[grains][feedback]") {
+  // A 5 x 3 x 5 block of 75 grains of 0.2 kg settles on the ground. At rest every substep
+  // gravity gives the pile sum(m) g dt of downward momentum and only the ground takes it back,
+  // so the ground's mean force over a frame is sum(m) g = 75 * 0.2 * 9.81 = 147.15 N.
+  // The balance holds when the grains' pair corrections conserve momentum, which is what
+  // disable_constraint_averaging is for (help page): with averaging, a pair's two corrections are
+  // divided by the two grains' different contact counts and create momentum between them (this
+  // 3-layer pile then reads 0.87 of its weight). So the test disables averaging, with the
+  // weights the help page asks for (0.5). Tolerance 2%: what is left of the settling motion.
+  Graph g = graph({{{"name", "src"}, {"type", "source"},
+                    {"params", {{"size", {0.5, 0.3, 0.5}}, {"separation", 0.1}, {"center", {0, 0.2, 0}},
+                                {"mass", 0.2}}}},
+                   {{"name", "grav"}, {"type", "force"}, {"inputs", {"src"}}, {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                   {{"name", "n"}, {"type", "grains"}, {"inputs", {"grav"}},
+                    {"params", {{"constraint_iterations", 20}, {"enable_collision_feedback", true},
+                                {"disable_constraint_averaging", true}, {"internal_collisions_weight", 0.5},
+                                {"friction_with_particles", 0.5}}}},
+                   ground_node(),
+                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                    {"params", {{"substeps", 4}, {"colliders", {"ground"}}}}}});
+  Simulation sim(g, 2);
+  std::string dir = test::temp_dir("feedback");
+  FrameWriter w(dir, {});
+  double sum_fy = 0, sum_fx = 0, sum_tx = 0;
+  int frames = 0;
+  for (int f = 1; f <= 48; ++f) {
+    sim.step_frame();
+    const FrameStats& st = sim.object(0).stats;
+    w.write(f, sim.object(0).pts, st, false);
+    REQUIRE(st.colliders.size() == 1);
+    if (f <= 36) continue;  // settled after 1.5 s
+    sum_fy += st.colliders[0].force.y;
+    sum_fx += st.colliders[0].force.x;
+    sum_tx += st.colliders[0].torque.x;
+    ++frames;
+  }
+  const double weight = 75 * 0.2 * kG;
+  double fy = -sum_fy / frames;  // the ground is pushed down
+  report("feedback: ground force / pile weight", fy / weight);
+  CHECK(std::fabs(fy - weight) < 0.02 * weight);
+  // the block is centred on the collider's origin: no sideways force, torque ~ 0 (a lever arm of
+  // ~2% of the 0.5 m block would be 0.01 m)
+  CHECK(std::fabs(sum_fx / frames) < 0.02 * weight);
+  CHECK(std::fabs(sum_tx / frames) < 0.01 * weight);
+  // DIR/colliders.csv: a header and one row per frame
+  std::string csv = test::read_text(dir + "/colliders.csv");
+  CHECK(csv.rfind("frame,time,collider,fx,fy,fz,tx,ty,tz\n", 0) == 0);
+  CHECK(std::count(csv.begin(), csv.end(), '\n') == 49);
+  CHECK(csv.find("\n48,2,ground,") != std::string::npos);
+}
+
+TEST_CASE("impact data: a dropped grain's impact impulses sum to its momentum change", "[grains][impacts]") {
+  // One grain of 0.5 kg dropped from 1 m falls on the ground, stops and rests. Over the run its
+  // momentum changes by m (v_end - v_0) = m v_end (v_0 = 0) while gravity gives -m g T, so the
+  // ground's impulse is J = m v_end + m g T (normal component). The sum of impactimpulse over
+  // the frames must match to 2% (it is the same accounting, up to float rounding: ~1e-5).
+  Graph g = graph({{{"name", "src"}, {"type", "source"},
+                    {"params", {{"size", {0.1, 0.1, 0.1}}, {"separation", 0.1}, {"center", {0, 1, 0}},
+                                {"mass", 0.5}}}},
+                   {{"name", "grav"}, {"type", "force"}, {"inputs", {"src"}}, {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                   {{"name", "n"}, {"type", "grains"}, {"inputs", {"grav"}}, {"params", {{"add_impact_data", true}}}},
+                   ground_node(),
+                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
+                    {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+  Simulation sim(g, 2);
+  double J = 0;
+  int first_hit = 0;
+  for (int f = 1; f <= 48; ++f) {
+    sim.step_frame();
+    const ParticleStore& s = sim.object(0).pts;
+    REQUIRE(s.size() == 1);
+    if (s.i_if("impact")[0]) {
+      if (!first_hit) {
+        first_hit = f;
+        CHECK(s.i_if("impactother")[0] == 0);
+        Vec3 n = load3(s.v3_if("impactN"), 0), x = load3(s.v3_if("impactP"), 0);
+        CHECK(n.y == Approx(1.0f));
+        CHECK(std::fabs(x.y) < 1e-4f);  // on the ground's surface
+      }
+      J += s.f_if("impactimpulse")[0];
+    }
+  }
+  const ParticleStore& s = sim.object(0).pts;
+  const double T = 2.0, m = 0.5;
+  double expected = m * load3(s.v3_if("v"), 0).y + m * kG * T;
+  report("impacts: sum impactimpulse / momentum change", J / expected);
+  report("impacts: first frame with an impact", first_hit);
+  CHECK(first_hit > 8);   // free fall from 0.95 m takes 0.44 s = 10.5 frames
+  CHECK(first_hit < 13);
+  CHECK(std::fabs(J - expected) < 0.02 * expected);
+}

@@ -1,0 +1,110 @@
+// Rigid shape matching (help page "Enable Rigid Shape Matching"; Müller et al. 2005): each
+// connected component of grains joined by 2-point primitives keeps a best-fit rigid placement of
+// its rest shape.
+#include <catch2/catch.hpp>
+
+#include <Eigen/Dense>
+#include <cmath>
+
+#include "tests/nodes/grains/grains_harness.h"
+
+using namespace grains;
+using namespace grains::test;
+
+namespace {
+
+// The largest distance of a grain from the best-fit rigid placement of the rest shape `rest`
+// (least squares: centroid + the rotation of the SVD of the cross-covariance).
+double deformation(const Scene& sc, const std::vector<Vec3>& rest) {
+  const size_t n = rest.size();
+  Eigen::Vector3d c = Eigen::Vector3d::Zero(), c0 = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < n; ++i) {
+    Vec3 x = sc.pos(i);
+    c += Eigen::Vector3d(x.x, x.y, x.z);
+    c0 += Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z);
+  }
+  c /= n;
+  c0 /= n;
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < n; ++i) {
+    Vec3 x = sc.pos(i);
+    A += (Eigen::Vector3d(x.x, x.y, x.z) - c) *
+         (Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z) - c0).transpose();
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU();
+  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
+  Eigen::Matrix3d R = U * svd.matrixV().transpose();
+  double worst = 0;
+  for (size_t i = 0; i < n; ++i) {
+    Vec3 x = sc.pos(i);
+    Eigen::Vector3d g = c + R * (Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z) - c0);
+    worst = std::max(worst, (Eigen::Vector3d(x.x, x.y, x.z) - g).norm());
+  }
+  return worst;
+}
+
+// A 10 x 10 x 10 cube of touching grains (r = 0.05, side 1 m), each joined to its +x, +y, +z
+// neighbours by a primitive, tilted 20 degrees and dropped from `height` on the ground.
+Scene cube(bool rigid, std::vector<Vec3>& rest, float height) {
+  Scene sc;
+  sc.s = settings(24, 4, 20);
+  sc.s.rigid_shape_matching = rigid;
+  sc.add_collider(ground());
+  const float r = 0.05f;
+  const int m = 10;
+  Pose tilt = Pose::from_trs({0, height + 0.9f, 0}, {20, 0, 10}, 1.0f);
+  auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b)
+      for (int c = 0; c < m; ++c) {
+        Vec3 local{(a - 4.5f) * 2 * r, (b - 4.5f) * 2 * r, (c - 4.5f) * 2 * r};
+        rest.push_back(local);
+        sc.add(tilt.apply(local), r);
+      }
+  // primitives to the +x, +y, +z neighbours: shape matching's connectivity only (explicit
+  // constraint weight 0, so they hold nothing by themselves)
+  sc.s.constraint_weight = 0;
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b)
+      for (int c = 0; c < m; ++c) {
+        if (a + 1 < m) sc.connect(index(a, b, c), index(a + 1, b, c));
+        if (b + 1 < m) sc.connect(index(a, b, c), index(a, b + 1, c));
+        if (c + 1 < m) sc.connect(index(a, b, c), index(a, b, c + 1));
+      }
+  return sc;
+}
+
+}  // namespace
+
+TEST_CASE("a shape-matched cube of 1,000 grains stays rigid when it lands", "[grains][shape]") {
+  // Without shape matching nothing holds the cube's grains together (primitives alone are not
+  // constraints here): it collapses into a heap, deforming by tens of percent. With it, the only
+  // deformation left is what the Jacobi averaging of the goal with the ground and contact
+  // corrections leaves in a substep (of the order of g dt^2 = 1 mm per layer of contacts the
+  // ground's push has not yet crossed), well below 0.5% of the 1 m side.
+  // Known limitation (not checked here): the ground turns the body only through its corner
+  // grains' corrections, diluted over the component by the fit, so a cube landing on a corner
+  // tips over far more slowly than a rigid body would (no inertia-aware contact response).
+  std::vector<Vec3> rest;
+  Scene sc = cube(true, rest, 0.2f);
+  double worst = 0;
+  for (int f = 0; f < 36; ++f) {
+    sc.run(1.0f / 24);
+    worst = std::max(worst, deformation(sc, rest));
+  }
+  float min_y = 1e9f;
+  for (size_t i = 0; i < sc.size(); ++i) min_y = std::min(min_y, sc.pos(i).y);
+  report("shape matching: worst deformation / side over 1.5 s", worst / 1.0);
+  report("shape matching: lowest grain centre / r", min_y / 0.05);
+  CHECK(worst < 0.005);
+  CHECK(min_y > 0.04f);  // it landed and stands on the ground (its lowest centre about r above it)
+  CHECK(min_y < 0.06f);
+
+  std::vector<Vec3> rest2;
+  Scene loose = cube(false, rest2, 0.2f);
+  loose.run(1.5f);
+  double loose_def = deformation(loose, rest2);
+  report("no shape matching: deformation / side", loose_def);
+  CHECK(loose_def > 0.05);
+}

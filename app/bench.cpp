@@ -76,7 +76,7 @@ struct ChildRecord {
   uint64_t points = 0;
   uint64_t n_final = 0;
   double wall_s = 0, step_s = 0, particle_iterations = 0, baseline_bytes = 0, mean_pscale = 0;
-  double energy_initial = 0, energy_final = 0;
+  double energy_initial = 0, energy_final = 0, constraint_iterations = 0;
   float max_penetration = 0, mean_penetration = 0, max_strain = 0, pad2 = 0;
 };
 
@@ -129,15 +129,18 @@ void child_run(const std::string& path, const BenchSetting& setting, int frames,
   Simulation sim(g, threads);
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
-    size_t points = 0;
+    size_t points = 0, constraints = 0;
     for (size_t k = 0; k < sim.object_count(); ++k) {
       const SimObject& o = sim.object(k);
       rec.step_s += o.stats.wall_ms / 1000.0;
       rec.max_strain = std::max(rec.max_strain, o.stats.max_strain);
       points += o.pts.size();
+      constraints += o.pts.prim_count();
     }
     rec.particle_iterations +=
         static_cast<double>(setting.substeps) * static_cast<double>(points) * setting.iterations;
+    rec.constraint_iterations +=
+        static_cast<double>(setting.substeps) * static_cast<double>(constraints) * setting.iterations;
     if (f == 1) rec.energy_initial = total_energy(sim);
   }
   rec.energy_final = total_energy(sim);
@@ -230,6 +233,7 @@ int run_setting(const std::string& path, const BenchSetting& setting, int frames
   row.wall_s = rec.wall_s;
   row.step_s = rec.step_s;
   row.particle_iterations = rec.particle_iterations;
+  row.constraint_iterations = rec.constraint_iterations;
   double peak = static_cast<double>(ru.ru_maxrss) * 1024.0;  // Linux: KiB
   row.peak_mib = peak / (1024.0 * 1024.0);
   row.bytes_per_grain = rec.points ? std::max(0.0, peak - rec.baseline_bytes) / double(rec.points) : 0;
@@ -567,7 +571,8 @@ void write_csv(const std::vector<std::vector<BenchRow>>& scenes, const std::stri
           << fmt("%.6g", r.error_radii) << "," << r.compared << ","
           << fmt("%.6g", r.max_penetration) << "," << fmt("%.6g", r.mean_penetration) << ","
           << fmt("%.6g", r.max_strain) << "," << fmt("%.8g", r.energy_initial) << ","
-          << fmt("%.8g", r.energy_final) << "," << fmt("%.6g", r.energy_drift) << "\n";
+          << fmt("%.8g", r.energy_final) << "," << fmt("%.6g", r.energy_drift) << ","
+          << fmt("%.6g", r.ci_per_s()) << "\n";
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
@@ -609,7 +614,8 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
         "overlap of touching pairs at the final frame as a fraction of the summed radii; *strain* "
         "is the largest constraint strain over the run; *energy drift* is (E_final - E_1) / |E_1| "
         "with E = sum m|v|^2/2 + m g y (g = 9.81, y up) and E_1 measured at the end of frame 1. "
-        "The reference row (**ref**) has error 0 by definition. "
+        "*constraint-iter/s* is the sum over substeps of explicit constraints x iterations divided "
+        "by the stepping time. The reference row (**ref**) has error 0 by definition. "
         "The plot `pareto.png` in the output folder draws s/frame against error.\n";
   for (const auto& rows : scenes) {
     if (rows.empty()) continue;
@@ -618,15 +624,16 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
        << "`" << f.path << "`: " << f.points << " grains at the final frame, " << f.frames
        << " frames.\n\n"
        << "| substeps x iterations | s/frame | particle-iter/s | wall s | peak MiB | B/grain | "
-          "error (radii) | max pen | mean pen | strain | energy drift |\n"
-       << "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
+          "error (radii) | max pen | mean pen | strain | energy drift | constraint-iter/s |\n"
+       << "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
     for (const auto& r : rows)
       md << "| " << r.setting.substeps << " x " << r.setting.iterations
          << (r.reference ? " **ref**" : "") << " | " << fmt("%.4g", r.s_per_frame()) << " | "
          << si(r.pi_per_s()) << " | " << fmt("%.2f", r.wall_s) << " | " << fmt("%.1f", r.peak_mib)
          << " | " << fmt("%.0f", r.bytes_per_grain) << " | " << fmt("%.3g", r.error_radii) << " | "
          << fmt("%.3g", r.max_penetration) << " | " << fmt("%.3g", r.mean_penetration) << " | "
-         << fmt("%.3g", r.max_strain) << " | " << fmt("%+.3g", r.energy_drift) << " |\n";
+         << fmt("%.3g", r.max_strain) << " | " << fmt("%+.3g", r.energy_drift) << " | "
+         << si(r.ci_per_s()) << " |\n";
   }
   fs::path p(path);
   if (p.has_parent_path()) fs::create_directories(p.parent_path());
@@ -700,7 +707,8 @@ BenchSweep quick_bench_sweep(const BenchSweep& s) {
 const char* bench_csv_header() {
   return "scene,substeps,iterations,reference,frames,points,threads,wall_s,step_s,s_per_frame,"
          "particle_iterations_per_s,peak_mib,bytes_per_grain,error_radii,compared,max_penetration,"
-         "mean_penetration,max_strain,energy_initial,energy_final,energy_drift";
+         "mean_penetration,max_strain,energy_initial,energy_final,energy_drift,"
+         "constraint_iterations_per_s";
 }
 
 int run_bench(const BenchOptions& o) {

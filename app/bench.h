@@ -58,6 +58,7 @@ struct BenchRow {
   double wall_s = 0;       // the child's whole run: load, stepping, diagnostics
   double step_s = 0;       // stepping only (Simulation::step_frame), no I/O, no diagnostics
   double particle_iterations = 0;  // sum over substeps of points x iterations
+  double constraint_iterations = 0;  // sum over substeps of constraints (at frame end) x iterations
   double peak_mib = 0;     // ru_maxrss of the child
   double bytes_per_grain = 0;  // (peak - resident before the simulation was built) / points
   double error_radii = 0;  // RMS final-position difference to the reference / mean pscale
@@ -67,6 +68,7 @@ struct BenchRow {
   double energy_initial = 0, energy_final = 0, energy_drift = 0;
   double s_per_frame() const { return frames > 0 ? step_s / frames : 0; }
   double pi_per_s() const { return step_s > 0 ? particle_iterations / step_s : 0; }
+  double ci_per_s() const { return step_s > 0 ? constraint_iterations / step_s : 0; }
 };
 
 // The documented header of results.csv.

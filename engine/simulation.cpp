@@ -174,8 +174,6 @@ void Simulation::step_object(SimObject& obj) {
     }
   }
   obj.stats = FrameStats{};
-  obj.stats.max_penetration = stats.max_penetration;
-  obj.stats.mean_penetration = stats.mean_penetration;
   // feedback: the frame's impulse over the frame's length is its mean force
   if (obj.feedback_on)
     for (size_t k = 0; k < obj.feedback.size(); ++k)

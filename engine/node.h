@@ -24,13 +24,6 @@ struct TimeInfo {
   double st = 0;      // simulation time at the start of this substep (s)
 };
 
-// Diagnostics a node may report for the frame's stats row.
-struct CookStats {
-  float max_penetration = 0;
-  float mean_penetration = 0;
-  float max_strain = 0;
-};
-
 // Momentum the particles gave one collider during the current frame (two-way coupling, help page
 // "Enable Collision Feedback"): the opposite of what the collider gave them. Nodes add to it;
 // the evaluator clears it at the start of each frame and FrameWriter writes it as the frame's
@@ -54,7 +47,6 @@ struct CookContext {
   uint64_t seed = 0;       // graph seed mixed with the node's index
   std::string node_name;
   std::string base_dir;  // folder of the graph file, for relative paths
-  CookStats* stats = nullptr;
   // Per collider (same order as `colliders`), for enable_collision_feedback; a node that adds to
   // it also sets *feedback_on so the frame's row is written.
   std::vector<ColliderFeedback>* feedback = nullptr;

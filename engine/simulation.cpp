@@ -124,7 +124,6 @@ void Simulation::step_object(SimObject& obj) {
   time.substeps = substeps;
   time.frame = frame_ + 1;
   time.dt = 1.0 / (graph_.fps * substeps);
-  CookStats stats;
   std::vector<uint32_t> members;
   obj.feedback.assign(obj.collider_nodes.size(), ColliderFeedback{});
   obj.feedback_on = false;
@@ -166,7 +165,6 @@ void Simulation::step_object(SimObject& obj) {
                       graph_.seed * 1000003ULL + static_cast<uint64_t>(c.node),
                       d.name,
                       graph_.base_dir,
-                      &stats,
                       &obj.feedback,
                       &obj.feedback_on,
                       &vars};

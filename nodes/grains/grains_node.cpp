@@ -93,8 +93,8 @@ class GrainsNode : public Node {
       d.impact_normal = imp_n_.data();
       d.impact_collider = imp_c_.data();
     }
-    GrainsStats stats;
-    solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), &stats);
+    // no GrainsStats: the evaluator measures each frame itself (measure_frame)
+    solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), nullptr);
     if (d.prim_count > 0) scatter_constraints(s);
     if (impacts) write_impacts(ctx, d);
     if (feedback && d.impact_collider && ctx.feedback && ctx.feedback->size() == ctx.colliders.size()) {

@@ -232,7 +232,7 @@ std::map<std::string, Special> specials() {
       {"source.rate", {{{"emission", "rate"}}, 50}},
       {"source.start_frame", {{{"emission", "rate"}, {"rate", 100}}, 4}},
       {"source.end_frame", {{{"emission", "rate"}, {"rate", 100}}, 3}},
-      {"source.density", {{{"density", 100}}, 300}},  // mass changes collider response? see below
+      {"source.density", {{{"density", 100}}, 300}},  // mass: the scene's force is in newtons
       {"source.mass", {json::object(), 3}},
       {"source.group", {json::object(), "fresh"}},
       {"source.activation", {json::object(), 0}},

@@ -286,7 +286,7 @@ void GrainsSolver::shape_goals(const float* p, int threads) {
 void GrainsSolver::project_shapes(int threads) {
   shape_goals(p_.data(), threads);
   p_.swap(shape_goal_);
-  if (plane_.empty() || plane_collider_.size() != GR_MAX_PLANES * radius_.size()) return;
+  if (plane_offsets_.size() != radius_.size() + 1) return;
   float* p = p_.data();
   const long comps = static_cast<long>(comp_offsets_.size()) - 1;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
@@ -294,9 +294,8 @@ void GrainsSolver::project_shapes(int threads) {
     Vec3 up, down;  // the largest positive and negative shift per axis
     for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
       uint32_t i = comp_members_[k];
-      for (int q = 0; q < GR_MAX_PLANES; ++q) {
-        if (plane_collider_[GR_MAX_PLANES * i + q] < 0) break;
-        const float* pl = plane_.data() + 9 * (GR_MAX_PLANES * i + q);
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
+        const float* pl = plane_.data() + 9 * e;
         Vec3 xs = load3(pl, 0), nrm = load3(pl, 1);
         float d = radius_[i] - dot(load3(p, i) - xs, nrm);
         if (!(d > 0)) continue;
@@ -315,20 +314,15 @@ void GrainsSolver::project_shapes(int threads) {
 void GrainsSolver::find_planes(const float* P, const float* p, const ColliderState* colliders,
                                size_t collider_count, float query_scale, int threads) {
   const long n = static_cast<long>(radius_.size());
-  float* plane = plane_.data();
-  int32_t* which = plane_collider_.data();
   const float* radius = radius_.data();
   // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
   // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
   // toward where it came from still finds the surface it moved away from. Up to GR_MAX_PLANES
-  // candidates are kept, nearest first (ties by collider order).
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < n; ++i) {
+  // candidates are kept, nearest first (ties by collider order). Two passes: count (row sizes),
+  // then fill the compact rows; each grain writes only its own row.
+  auto nearest = [&](long i, float* dist, Vec3* nrm, int32_t* idx) {
     Vec3 x = load3(p, i);
     float range = query_scale * radius[i] + length(x - load3(P, i));
-    float dist[GR_MAX_PLANES];
-    Vec3 nrm[GR_MAX_PLANES];
-    int32_t idx[GR_MAX_PLANES];
     int count = 0;
     for (size_t c = 0; c < collider_count; ++c) {
       Vec3 nc;
@@ -349,15 +343,39 @@ void GrainsSolver::find_planes(const float* P, const float* p, const ColliderSta
       idx[at] = static_cast<int32_t>(c);
       count = std::min(count + 1, GR_MAX_PLANES);
     }
-    float* pl = plane + 9 * GR_MAX_PLANES * i;
-    std::fill(pl, pl + 9 * GR_MAX_PLANES, 0.0f);
-    for (int k = 0; k < GR_MAX_PLANES; ++k) which[GR_MAX_PLANES * i + k] = k < count ? idx[k] : -1;
+    return count;
+  };
+  plane_offsets_.resize(n + 1);
+  uint32_t* offsets = plane_offsets_.data();
+  offsets[0] = 0;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < n; ++i) {
+    float dist[GR_MAX_PLANES];
+    Vec3 nrm[GR_MAX_PLANES];
+    int32_t idx[GR_MAX_PLANES];
+    offsets[i + 1] = static_cast<uint32_t>(nearest(i, dist, nrm, idx));
+  }
+  for (long i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
+  plane_.resize(9 * size_t(offsets[n]));
+  plane_collider_.resize(offsets[n]);
+  float* plane = plane_.data();
+  int32_t* which = plane_collider_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < n; ++i) {
+    if (offsets[i + 1] == offsets[i]) continue;
+    float dist[GR_MAX_PLANES];
+    Vec3 nrm[GR_MAX_PLANES];
+    int32_t idx[GR_MAX_PLANES];
+    const int count = nearest(i, dist, nrm, idx);
+    Vec3 x = load3(p, i);
     for (int k = 0; k < count; ++k) {
+      const uint32_t e = offsets[i] + k;
       Vec3 xs = x - nrm[k] * dist[k];
       Vec3 vc = colliders[idx[k]].velocity_at(xs);
-      store3(pl + 9 * k, 0, xs);
-      store3(pl + 9 * k, 1, nrm[k]);
-      store3(pl + 9 * k, 2, vc);
+      which[e] = idx[k];
+      store3(plane + 9 * e, 0, xs);
+      store3(plane + 9 * e, 1, nrm[k]);
+      store3(plane + 9 * e, 2, vc);
     }
   }
 }
@@ -560,9 +578,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (pairs_on) find_pairs(true);
   if (colliders_on) {
-    plane_.resize(9 * GR_MAX_PLANES * n);
-    plane_collider_.resize(GR_MAX_PLANES * n);
     find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+    g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
   }
 
@@ -571,7 +588,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   for (int it = 0; it < iterations; ++it) {
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations)
+    {
       find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+      g.plane_offsets = plane_offsets_.data();
+      g.plane = plane_.data();
+    }
     const float* p = p_.data();
     float* next = p_next_.data();
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -617,13 +638,14 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       // changes v directly (added to its collider's slot, or a free one). Blend and caps, which
       // act on v after the loop, are not counted.
       const int K = GR_MAX_PLANES;
-      const int32_t* pc = plane_collider_.data() + K * i;
+      const uint32_t row = plane_offsets_[i];
+      const int planes = static_cast<int>(plane_offsets_[i + 1] - row);
       int hit_slot = -1;
       for (int q = 0; q < K; ++q) {
         const size_t slot = K * i + q;
-        const int32_t c = pc[q];
+        const int32_t c = q < planes ? plane_collider_[row + q] : -1;
         Vec3 dv = c >= 0 ? load3(collider_dx_.data(), slot) / s.dt : Vec3{};
-        Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * slot, 1) : Vec3{};
+        Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * (row + q), 1) : Vec3{};
         if (hit >= 0 && hit_slot < 0 && (c == hit || c < 0)) {
           hit_slot = q;
           dv += v - v_loop;

@@ -158,8 +158,10 @@ class GrainsSolver {
   std::vector<float> radius_;       // (n) m: pscale, or particle_separation / 2 when missing
   std::vector<float> mass_;         // (n) kg: copy of mass, or 1 when missing
   std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)
-  std::vector<float> plane_;        // (n x GR_MAX_PLANES x 9): planes nearest first: point, normal, velocity
-  std::vector<int32_t> plane_collider_;  // (n x GR_MAX_PLANES): collider index of each plane, -1 none
+  // collider planes, a compact row per grain (at most GR_MAX_PLANES, nearest first)
+  std::vector<uint32_t> plane_offsets_;  // (n + 1)
+  std::vector<float> plane_;             // (entries x 9): surface point, normal, velocity
+  std::vector<int32_t> plane_collider_;  // (entries): collider index of each plane
   // explicit constraints: per-grain rows of (other endpoint, primitive), rebuilt each substep
   std::vector<uint32_t> con_offsets_;      // (n + 1)
   std::vector<uint32_t> con_other_, con_prim_;  // (2 m)

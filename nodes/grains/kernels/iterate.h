@@ -57,7 +57,7 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   int count = 0, ccount = 0;
   float pen[GR_MAX_PLANES];
   if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
-  if (g->plane) ccount = gr_gather_collider(g, prm, p, i, with_friction, pen, &csum);
+  if (g->plane_offsets) ccount = gr_gather_collider(g, prm, p, i, with_friction, pen, &csum);
   count += ccount;
   sum = gr_add(sum, csum);
   if (g->con_offsets) count += gr_gather_constraints(g, prm, p, i, &sum);
@@ -72,7 +72,7 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
       for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k)
         acc->pair[k] += acc->pair_iteration[k] * share;
     }
-    if (acc->collider && g->plane) {
+    if (acc->collider && g->plane_offsets) {
       int k;
       for (k = 0; k < GR_MAX_PLANES; ++k) acc->collider[GR_MAX_PLANES * i + k] += pen[k] * share;
     }
@@ -87,7 +87,7 @@ GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
   gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0, ccount = 0;
   if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
-  if (acc->collider && g->plane)
+  if (acc->collider && g->plane_offsets)
     ccount = gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &csum);
   count += ccount;
   sum = gr_add(sum, csum);

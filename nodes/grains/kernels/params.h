@@ -60,10 +60,12 @@ typedef struct {
   const GR_GLOBAL float* attractionstiffness; /* (n) optional */
   const GR_GLOBAL gr_uint* nbr_offsets;       /* (n + 1) neighbour rows, or null: no pairs */
   const GR_GLOBAL gr_uint* nbr_indices;
-  /* (n x GR_MAX_PLANES x 9): collider contact planes per grain, nearest first: surface point
-   * (m), unit normal, surface velocity (m/s); a zero normal ends the list. Null when there are
-   * no colliders. */
-  const GR_GLOBAL float* plane;
+  /* collider contact planes: row i lists grain i's planes (at most GR_MAX_PLANES, nearest
+   * first), entries [plane_offsets[i], plane_offsets[i + 1]) of `plane`, 9 floats each: surface
+   * point (m), unit normal, surface velocity (m/s). Stored compactly: a grain far from every
+   * collider costs one offset. Both null when there are no colliders. */
+  const GR_GLOBAL gr_uint* plane_offsets; /* (n + 1) */
+  const GR_GLOBAL float* plane;           /* (entries x 9) */
   /* explicit constraints: row i of the adjacency lists i's constraints, other endpoint
    * con_other[k] and primitive con_prim[k], k in [con_offsets[i], con_offsets[i + 1]), in
    * primitive order. Null when the constraint weight is 0 or there are no constraints. */

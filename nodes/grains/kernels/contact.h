@@ -53,31 +53,105 @@ GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
   return gr_scale(gr_friction(dx, n, bound, prm->static_threshold, prm->scale_kinetic), share);
 }
 
+/* The common case of gr_gather_pairs: contacts only (no clumping, friction after the loop, no
+ * constraint adjacency, no local mass-shock). The same eq. 22 correction, written without
+ * branches over blocks of GR_LANES candidates so the compiler turns each block into vector
+ * instructions: every candidate is computed, and one that is apart, past the end of the row or
+ * i itself contributes 0. Lanes past the end repeat the row's last entry, so the block never
+ * reads outside the row. Each lane keeps its own sums, added in lane order at the end: the
+ * result depends on the row, not on the thread count. Coincident grains separate along -+y by
+ * index, as gr_pair_normal. Shares w_i / (w_i + w_j) with global mass-shock come from inv_mass. */
+#define GR_LANES 8
+GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int i,
+                              float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum) {
+  const float px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
+  const float ri = g->radius[i], wi = g->inv_mass[i];
+  const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
+  const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
+  float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
+  gr_uint k;
+  int l;
+  for (l = 0; l < GR_LANES; ++l) lx[l] = ly[l] = lz[l] = lc[l] = 0.0f;
+  for (k = b; k < e; k += GR_LANES) {
+    for (l = 0; l < GR_LANES; ++l) {
+      const int live = k + (gr_uint)l < e;
+      const gr_uint kk = live ? k + (gr_uint)l : e - 1;
+      const int j = (int)nbr[kk];
+      const float dx = px - p[3 * j], dy = py - p[3 * j + 1], dz = pz - p[3 * j + 2];
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      const float rsum = ri + g->radius[j];
+      const float dist = gr_sqrt(d2);
+      const float wsum = wi + g->inv_mass[j];
+      const int touching = (d2 < rsum * rsum) & (j != i) & (wsum > 0.0f);
+      const float d = touching ? rsum - dist : 0.0f;
+      /* correction length share * d * repulse along n = x_ij / dist */
+      const float f = (touching & live) ? wi / wsum * d * repulse : 0.0f;
+      const float along = dist > 0.0f ? f / dist : 0.0f;
+      const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
+      lx[l] += along * dx;
+      ly[l] += along * dy + apart_y;
+      lz[l] += along * dz;
+      lc[l] += f != 0.0f ? 1.0f : 0.0f;
+      ld[l] = d;
+    }
+    if (overlap_out)
+      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k + (gr_uint)l] = ld[l];
+  }
+  {
+    float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;
+    for (l = 0; l < GR_LANES; ++l) {
+      sx += lx[l];
+      sy += ly[l];
+      sz += lz[l];
+      count += lc[l];
+    }
+    sum->x += sx;
+    sum->y += sy;
+    sum->z += sz;
+    return (int)count;
+  }
+}
+
 /* One Jacobi iteration's pair corrections of grain i (contacts, with friction when
  * `with_friction`, and clumping), read from the iterate p. Adds to *sum, returns how many
  * constraints produced a nonzero correction. When `overlap_out` is not null it receives, per
- * entry of i's neighbour row, the contact overlap seen this iteration (0: no contact). */
+ * entry of i's neighbour row, the contact overlap seen this iteration (0: no contact).
+ * Most candidates are apart: they are rejected on the squared distance, before any square root,
+ * division or attribute read. */
 GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
                               int i, int with_friction, GR_GLOBAL float* overlap_out,
                               gr_float3* sum) {
   int count = 0;
+  gr_uint k;
   gr_float3 pi = gr_load3(p, i);
   float ri = g->radius[i];
   float repulse = prm->repulsion_weight > 0.0f ? gr_repulsion_scale(g, prm, i) : 0.0f;
   float clump = prm->clumping_weight > 0.0f ? gr_clump_scale(g, prm, i) : 0.0f;
+  /* squared reach of a candidate that can act, in units of (r_i + r_j)^2 */
+  float reach2 = clump > 0.0f ? prm->query_scale * prm->query_scale : 1.0f;
   int fric = with_friction && prm->friction_with_particles > 0.0f;
   int skip_constrained = g->con_offsets && !prm->collide_constrained;
-  gr_uint k;
-  for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
+  if (!(clump > 0.0f) && !fric && !skip_constrained && prm->mass_shock != 2) {
+    if (!(repulse > 0.0f)) {
+      if (overlap_out)
+        for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k] = 0.0f;
+      return 0;
+    }
+    return gr_gather_contacts(g, p, i, repulse, overlap_out, sum);
+  }
+  gr_float3 acc = gr_make3(0.0f, 0.0f, 0.0f);
+  const gr_uint row_end = g->nbr_offsets[i + 1];
+  for (k = g->nbr_offsets[i]; k < row_end; ++k) {
     int j = (int)g->nbr_indices[k];
+    gr_float3 xij = gr_sub(pi, gr_load3(p, j));
+    float d2 = gr_dot(xij, xij);
+    float rsum = ri + g->radius[j];
     if (overlap_out) overlap_out[k] = 0.0f;
-    if (j == i) continue;
+    if (!(d2 < reach2 * rsum * rsum) || j == i) continue;
     /* constrained pairs do not collide unless asked (help page "Collide Mutually Constrained
      * Particles"); they keep their rest length instead */
     if (skip_constrained && gr_constrained(g, i, j)) continue;
-    gr_float3 xij = gr_sub(pi, gr_load3(p, j));
-    float dist = gr_length(xij);
-    float rsum = ri + g->radius[j];
+    float dist = gr_sqrt(d2);
     gr_float3 corr;
     if (dist < rsum) {
       if (!(repulse > 0.0f)) continue;
@@ -94,10 +168,11 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
       continue;
     }
     if (corr.x != 0.0f || corr.y != 0.0f || corr.z != 0.0f) {
-      *sum = gr_add(*sum, corr);
+      acc = gr_add(acc, corr);
       ++count;
     }
   }
+  *sum = gr_add(*sum, acc);
   return count;
 }
 

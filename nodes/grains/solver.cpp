@@ -556,7 +556,10 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     g.nbr_indices = neighbors_.indices.data();
     if (!pair_friction_pass) return;
     const size_t entries = neighbors_.indices.size();
-    pair_normal_it_.resize(entries);
+    size_t longest = 0;
+    for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
+    row_length_ = std::max<size_t>(longest, 1);
+    pair_normal_it_.resize(row_length_ * size_t(threads));
     if (first) {
       pair_normal_.assign(entries, 0.0f);
     } else {
@@ -595,10 +598,15 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     }
     const float* p = p_.data();
     float* next = p_next_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) {
-      int ii = static_cast<int>(i);
-      gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &acc));
+#pragma omp parallel num_threads(threads)
+    {
+      gr_normal_sums mine = acc;  // this thread's row scratch
+      if (mine.pair_iteration) mine.pair_iteration += row_length_ * size_t(omp_get_thread_num());
+#pragma omp for schedule(static)
+      for (long i = 0; i < ln; ++i) {
+        int ii = static_cast<int>(i);
+        gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &mine));
+      }
     }
     p_.swap(p_next_);
     if (shapes_on) project_shapes(threads);

@@ -151,7 +151,9 @@ class GrainsSolver {
   std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
   std::vector<float> P0_;           // (n x 3) m: P at the start of the substep
   // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
-  std::vector<float> pair_normal_, pair_normal_it_;  // (neighbour entries) m
+  std::vector<float> pair_normal_;     // (neighbour entries) m
+  std::vector<float> pair_normal_it_;  // (threads x row_length_) m: this iteration's overlaps
+  size_t row_length_ = 1;              // the longest neighbour row
   std::vector<float> collider_normal_;               // (n) m
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
   std::vector<float> search_radius_;  // (n) m: the largest radius, with assume_uniform_radius

@@ -95,7 +95,7 @@ GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int 
       ld[l] = d;
     }
     if (overlap_out)
-      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k + (gr_uint)l] = ld[l];
+      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
   }
   {
     float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;
@@ -114,8 +114,8 @@ GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int 
 
 /* One Jacobi iteration's pair corrections of grain i (contacts, with friction when
  * `with_friction`, and clumping), read from the iterate p. Adds to *sum, returns how many
- * constraints produced a nonzero correction. When `overlap_out` is not null it receives, per
- * entry of i's neighbour row, the contact overlap seen this iteration (0: no contact).
+ * constraints produced a nonzero correction. When `overlap_out` is not null, overlap_out[k] receives
+ * the contact overlap seen this iteration with the k-th entry of i's neighbour row (0: none).
  * Most candidates are apart: they are rejected on the squared distance, before any square root,
  * division or attribute read. */
 GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
@@ -134,19 +134,19 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
   if (!(clump > 0.0f) && !fric && !skip_constrained && prm->mass_shock != 2) {
     if (!(repulse > 0.0f)) {
       if (overlap_out)
-        for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k] = 0.0f;
+        for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k - g->nbr_offsets[i]] = 0.0f;
       return 0;
     }
     return gr_gather_contacts(g, p, i, repulse, overlap_out, sum);
   }
   gr_float3 acc = gr_make3(0.0f, 0.0f, 0.0f);
-  const gr_uint row_end = g->nbr_offsets[i + 1];
-  for (k = g->nbr_offsets[i]; k < row_end; ++k) {
+  const gr_uint row_begin = g->nbr_offsets[i], row_end = g->nbr_offsets[i + 1];
+  for (k = row_begin; k < row_end; ++k) {
     int j = (int)g->nbr_indices[k];
     gr_float3 xij = gr_sub(pi, gr_load3(p, j));
     float d2 = gr_dot(xij, xij);
     float rsum = ri + g->radius[j];
-    if (overlap_out) overlap_out[k] = 0.0f;
+    if (overlap_out) overlap_out[k - row_begin] = 0.0f;
     if (!(d2 < reach2 * rsum * rsum) || j == i) continue;
     /* constrained pairs do not collide unless asked (help page "Collide Mutually Constrained
      * Particles"); they keep their rest length instead */
@@ -160,7 +160,7 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
       float share = gr_pair_share(g, prm, i, j);
       corr = gr_scale(n, share * d * repulse);
       if (fric) corr = gr_add(corr, gr_pair_friction(g, prm, p, i, j, n, d, share));
-      if (overlap_out) overlap_out[k] = d;
+      if (overlap_out) overlap_out[k - row_begin] = d;
     } else if (clump > 0.0f && dist < prm->query_scale * rsum) {
       gr_float3 n = gr_scale(xij, 1.0f / dist);
       corr = gr_clump_pair(n, dist - rsum, gr_plain_share(g, i, j), clump);

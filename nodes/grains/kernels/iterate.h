@@ -12,7 +12,8 @@
 /* Accumulated contact overlaps for the friction pass after the loop (accurate_friction off);
  * all null when not needed. */
 typedef struct {
-  GR_GLOBAL float* pair_iteration; /* (neighbour entries) overlap this iteration, scratch */
+  GR_GLOBAL float* pair_iteration; /* (row length) overlap this iteration: the caller's
+                                    * scratch for the grain being iterated (per thread) */
   GR_GLOBAL float* pair;           /* (neighbour entries) sum over iterations of overlap / n_i */
   GR_GLOBAL float* collider;       /* (n x GR_MAX_PLANES) the same for the collider planes */
   /* (n x GR_MAX_PLANES x 3) m: each collider plane's share of i's applied corrections, summed
@@ -52,6 +53,7 @@ GR_INLINE void gr_add_collider_dx(GR_GLOBAL float* collider_dx, int i, gr_float3
  * explicit constraints, pins */
 GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
                                int i, int with_friction, const gr_normal_sums* acc) {
+  /* acc->pair_iteration is row scratch, read back below; acc->pair is per neighbour entry */
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
   gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0, ccount = 0;
@@ -69,8 +71,8 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {
       gr_uint k;
-      for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k)
-        acc->pair[k] += acc->pair_iteration[k] * share;
+      const gr_uint b = g->nbr_offsets[i];
+      for (k = b; k < g->nbr_offsets[i + 1]; ++k) acc->pair[k] += acc->pair_iteration[k - b] * share;
     }
     if (acc->collider && g->plane_offsets) {
       int k;

@@ -4,6 +4,7 @@
 // its own; the parent never runs OpenMP code, so forking is safe. The child writes one binary
 // record (its figures) and the final positions keyed by id to a temporary file the parent reads.
 #include "app/bench.h"
+#include "app/bench_features.h"
 #include "app/bench_run.h"
 
 #include <sys/resource.h>
@@ -175,6 +176,14 @@ void child_run(const std::string& path, const std::vector<Override>& overrides, 
 }
 
 }  // namespace
+
+void check_bench_scene(const Graph& g, const std::string& path) {
+  int solver = g.find("solver"), grains = g.find("grains");
+  if (solver < 0 || g.nodes[solver].type != "solver")
+    throw LoadError(path, "/nodes", "bench scenes need a solver node named `solver` (bench/README.md)");
+  if (grains < 0 || g.nodes[grains].type != "grains")
+    throw LoadError(path, "/nodes", "bench scenes need a grains node named `grains` (bench/README.md)");
+}
 
 BenchSetting scene_setting(const Graph& g) {
   return {constant_int(g, "solver", "substeps"), constant_int(g, "grains", "constraint_iterations")};
@@ -670,6 +679,14 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
          << fmt("%.3g", r.max_strain) << " | " << fmt("%+.3g", r.energy_drift) << " | "
          << si(r.ci_per_s()) << " |\n";
   }
+  // the features section belongs to `grains bench --features`: carry it over unchanged
+  if (fs::exists(path)) {
+    std::ifstream in(path);
+    std::ostringstream old;
+    old << in.rdbuf();
+    std::string section = features_section_of(old.str());
+    if (!section.empty()) md << "\n" << section;
+  }
   fs::path p(path);
   if (p.has_parent_path()) fs::create_directories(p.parent_path());
   std::ofstream out(path);
@@ -741,6 +758,7 @@ const char* bench_csv_header() {
 }
 
 int run_bench(const BenchOptions& o) {
+  if (o.features) return run_feature_bench(o);
   // scenes
   std::vector<std::string> paths = o.scenes;
   if (paths.empty()) {
@@ -759,11 +777,7 @@ int run_bench(const BenchOptions& o) {
   std::vector<std::string> names;
   for (const auto& p : paths) {
     Graph g = load_graph(p);
-    int solver = g.find("solver"), grains = g.find("grains");
-    if (solver < 0 || g.nodes[solver].type != "solver")
-      throw LoadError(p, "/nodes", "bench scenes need a solver node named `solver` (bench/README.md)");
-    if (grains < 0 || g.nodes[grains].type != "grains")
-      throw LoadError(p, "/nodes", "bench scenes need a grains node named `grains` (bench/README.md)");
+    check_bench_scene(g, p);
     load_graph(p, setting_overrides({1, 1}));  // the overrides apply
     BenchSweep s = load_bench_sweep(p);
     if (o.quick) s = quick_bench_sweep(s);
@@ -844,12 +858,21 @@ int run_bench(const BenchOptions& o) {
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o, int argc, char** argv) {
   auto* b = app.add_subcommand("bench", "speed versus error: run benchmark scenes at several settings");
   b->add_option("scenes", o.scenes, "scene graphs (default: every bench/*.json here)");
-  b->add_option("--out", o.out_dir, "output folder for results.csv and pareto.png (default out/bench)");
+  b->add_option("--out", o.out_dir, "output folder for results.csv and pareto.png, or features.csv (default out/bench)");
   b->add_option("--md", o.md_path, "Markdown report to regenerate (default BENCHMARKS.md)");
-  b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds");
+  b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds (with --features: at most 12 frames)");
   b->add_option("--frames", o.frames, "frames per run (default: the sweep file's or the graph's)")
       ->check(CLI::PositiveNumber);
   b->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  auto* features = b->add_flag(
+      "--features", o.features,
+      "instead of the sweep: the cost of each grains feature on one scene as written (default "
+      "bench/settle_100k.json); writes features.csv and the report's features section");
+  std::string names;
+  for (const auto& f : bench_features()) names += (names.empty() ? "" : ", ") + f.name;
+  b->add_option("--only", o.only, "with --features: only these features (comma-separated): " + names)
+      ->delimiter(',')
+      ->needs(features);
   std::string cmd;
   for (int k = 0; k < argc; ++k) cmd += (k ? " " : "") + quote_arg(argv[k]);
   o.command = cmd;

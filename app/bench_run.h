@@ -19,6 +19,10 @@ struct KeyedPos {
   float x, y, z;
 };
 
+// Refuses (LoadError) a scene without a solver node named `solver` and a grains node named
+// `grains` (the bench scene convention, bench/README.md).
+void check_bench_scene(const Graph& g, const std::string& path);
+
 // The substeps of the node named `solver` and the constraint_iterations of the node named
 // `grains`, as the graph sets them (their declared defaults when absent). Particle-iterations are
 // counted from these, so an animated value is refused: throws LoadError.

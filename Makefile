@@ -3,7 +3,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 GRAINS := $(BUILD)/grains
 
-.PHONY: deps configure build demo test bench clean format
+.PHONY: deps configure build demo test bench bench-features clean format
 
 deps:
 	bash scripts/install-deps.sh
@@ -24,6 +24,9 @@ test: build
 
 bench: build
 	$(GRAINS) bench --out out/bench
+
+bench-features: build
+	$(GRAINS) bench --features --out out/bench
 
 clean:
 	rm -rf $(BUILD) out

@@ -4,6 +4,8 @@
 // its own; the parent never runs OpenMP code, so forking is safe. The child writes one binary
 // record (its figures) and the final positions keyed by id to a temporary file the parent reads.
 #include "app/bench.h"
+#include "app/bench_features.h"
+#include "app/bench_run.h"
 
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -43,27 +45,10 @@
 namespace fs = std::filesystem;
 
 namespace grains {
+namespace bench {
 namespace {
 
 constexpr double kGravity = 9.81;  // energy: E = sum m |v|^2 / 2 + m g y
-constexpr int kQuickFrames = 12;
-
-// ---------------------------------------------------------------------------------------------
-// Sweeps
-
-BenchSetting parse_setting(const nlohmann::json& j, const std::string& file, const std::string& ptr) {
-  if (!j.is_array() || j.size() != 2 || !j[0].is_number_integer() || !j[1].is_number_integer())
-    throw LoadError(file, ptr, "expected [substeps, iterations] (two integers)");
-  BenchSetting s{j[0].get<int>(), j[1].get<int>()};
-  if (s.substeps < 1 || s.iterations < 1)
-    throw LoadError(file, ptr, "substeps and iterations must be at least 1");
-  return s;
-}
-
-std::string sweep_path_for(const std::string& graph_path) {
-  fs::path p(graph_path);
-  return (p.parent_path() / (p.stem().string() + ".sweep.json")).string();
-}
 
 // ---------------------------------------------------------------------------------------------
 // The child: one run of one setting
@@ -72,17 +57,13 @@ struct ChildRecord {
   int32_t magic = 0x62656e63;  // "benc"
   int32_t frames = 0;
   int32_t threads = 0;
+  int32_t substeps = 0, iterations = 0;
   int32_t pad = 0;
   uint64_t points = 0;
   uint64_t n_final = 0;
   double wall_s = 0, step_s = 0, particle_iterations = 0, baseline_bytes = 0, mean_pscale = 0;
   double energy_initial = 0, energy_final = 0, constraint_iterations = 0;
   float max_penetration = 0, mean_penetration = 0, max_strain = 0, pad2 = 0;
-};
-
-struct KeyedPos {
-  int64_t key;
-  float x, y, z;
 };
 
 double resident_bytes() {
@@ -112,17 +93,34 @@ double total_energy(const Simulation& sim) {
   return e;
 }
 
-std::vector<Override> setting_overrides(const BenchSetting& s) {
-  return {Override{"solver", "substeps", std::to_string(s.substeps)},
-          Override{"grains", "constraint_iterations", std::to_string(s.iterations)}};
+// A constant Int parameter of the node `node`, or its declared default.
+int constant_int(const Graph& g, const std::string& node, const std::string& param) {
+  int k = g.find(node);
+  if (k < 0) throw LoadError(g.file, "/nodes", "no node named `" + node + "` (bench/README.md)");
+  const NodeDesc& n = g.nodes[k];
+  auto it = n.params.find(param);
+  if (it != n.params.end()) {
+    if (it->second.channels.size() != 1 ||
+        it->second.channels[0].kind != ChannelSource::Kind::Constant)
+      throw LoadError(g.file, n.pointer + "/params/" + param,
+                      "the benchmark counts particle-iterations from a constant `" + param + "`");
+    return static_cast<int>(std::lround(it->second.channels[0].value));
+  }
+  if (n.info)
+    for (const ParamDecl& d : n.info->params)
+      if (d.name == param) return static_cast<int>(std::lround(d.def[0]));
+  throw LoadError(g.file, n.pointer, "node `" + node + "` has no parameter `" + param + "`");
 }
 
-void child_run(const std::string& path, const BenchSetting& setting, int frames, int threads,
-               const std::string& result_path) {
+void child_run(const std::string& path, const std::vector<Override>& overrides, int frames,
+               int threads, const std::string& result_path) {
   auto t0 = std::chrono::steady_clock::now();
-  Graph g = load_graph(path, setting_overrides(setting));
+  Graph g = load_graph(path, overrides);
   if (frames > 0) g.frames = frames;
+  const BenchSetting setting = scene_setting(g);
   ChildRecord rec;
+  rec.substeps = setting.substeps;
+  rec.iterations = setting.iterations;
   rec.baseline_bytes = resident_bytes();
   rec.threads = threads;
   rec.frames = g.frames;
@@ -177,10 +175,23 @@ void child_run(const std::string& path, const BenchSetting& setting, int frames,
   fs::rename(tmp, result_path);
 }
 
-// Forks a child for one setting. Returns its exit code; fills row and positions on success.
-int run_setting(const std::string& path, const BenchSetting& setting, int frames, int threads,
-                const std::string& tmp_dir, BenchRow& row, std::vector<KeyedPos>& positions,
-                double& mean_pscale) {
+}  // namespace
+
+void check_bench_scene(const Graph& g, const std::string& path) {
+  int solver = g.find("solver"), grains = g.find("grains");
+  if (solver < 0 || g.nodes[solver].type != "solver")
+    throw LoadError(path, "/nodes", "bench scenes need a solver node named `solver` (bench/README.md)");
+  if (grains < 0 || g.nodes[grains].type != "grains")
+    throw LoadError(path, "/nodes", "bench scenes need a grains node named `grains` (bench/README.md)");
+}
+
+BenchSetting scene_setting(const Graph& g) {
+  return {constant_int(g, "solver", "substeps"), constant_int(g, "grains", "constraint_iterations")};
+}
+
+int run_child(const std::string& path, const std::vector<Override>& overrides,
+              const std::string& label, int frames, int threads, const std::string& tmp_dir,
+              BenchRow& row, std::vector<KeyedPos>& positions, double& mean_pscale) {
   static int counter = 0;
   std::string result_path =
       tmp_dir + "/.run_" + std::to_string(getpid()) + "_" + std::to_string(counter++) + ".bin";
@@ -190,13 +201,13 @@ int run_setting(const std::string& path, const BenchSetting& setting, int frames
   if (pid == 0) {
     int rc = 0;
     try {
-      child_run(path, setting, frames, threads, result_path);
+      child_run(path, overrides, frames, threads, result_path);
     } catch (const LoadError& e) {
       std::fprintf(stderr, "grains bench: error: %s\n", e.what());
       rc = 2;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "grains bench: %s at %dx%d failed: %s\n", path.c_str(), setting.substeps,
-                   setting.iterations, e.what());
+      std::fprintf(stderr, "grains bench: %s (%s) failed: %s\n", path.c_str(), label.c_str(),
+                   e.what());
       rc = 1;
     }
     std::fflush(nullptr);
@@ -207,8 +218,8 @@ int run_setting(const std::string& path, const BenchSetting& setting, int frames
   if (wait4(pid, &status, 0, &ru) < 0)
     throw std::runtime_error(std::string("wait4 failed: ") + std::strerror(errno));
   if (!WIFEXITED(status)) {
-    std::fprintf(stderr, "grains bench: %s at %dx%d: the run died (signal %d)\n", path.c_str(),
-                 setting.substeps, setting.iterations, WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+    std::fprintf(stderr, "grains bench: %s (%s): the run died (signal %d)\n", path.c_str(),
+                 label.c_str(), WIFSIGNALED(status) ? WTERMSIG(status) : 0);
     return 1;
   }
   if (WEXITSTATUS(status) != 0) return WEXITSTATUS(status);
@@ -226,7 +237,7 @@ int run_setting(const std::string& path, const BenchSetting& setting, int frames
   std::sort(positions.begin(), positions.end(),
             [](const KeyedPos& a, const KeyedPos& b) { return a.key < b.key; });
 
-  row.setting = setting;
+  row.setting = {rec.substeps, rec.iterations};
   row.frames = rec.frames;
   row.points = rec.points;
   row.threads = rec.threads;
@@ -271,17 +282,7 @@ double rms_difference(const std::vector<KeyedPos>& a, const std::vector<KeyedPos
 }
 
 // ---------------------------------------------------------------------------------------------
-// The machine
-
-struct Machine {
-  std::string cpu = "unknown processor";
-  long cores = 1;
-  double mem_gib = 0;
-  std::string date;
-  std::string commit;
-  bool dirty = false;  // the working tree's engine/, nodes/ or app/ differ from the commit
-  std::string load;    // /proc/loadavg's 1-minute figure when the benchmark started
-};
+// The machine and the reports' number formats
 
 Machine describe_machine() {
   Machine m;
@@ -316,6 +317,76 @@ Machine describe_machine() {
   m.dirty = !m.commit.empty() &&
             std::system("git diff --quiet HEAD -- engine nodes app CMakeLists.txt 2>/dev/null") != 0;
   return m;
+}
+
+std::string fmt(const char* f, double v) {
+  if (!std::isfinite(v)) return "nan";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+std::string si(double v) {
+  if (!std::isfinite(v)) return "nan";
+  const char* unit[] = {"", " k", " M", " G"};
+  int u = 0;
+  while (std::fabs(v) >= 1000 && u < 3) {
+    v /= 1000;
+    ++u;
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof buf, v >= 100 ? "%.0f%s" : "%.3g%s", v, unit[u]);
+  return buf;
+}
+
+std::string machine_markdown(const Machine& m, int threads) {
+  std::ostringstream md;
+  md << "- **Date:** " << m.date << "\n"
+     << "- **Machine:** " << m.cpu << ", " << m.cores << " cores, "
+     << fmt("%.1f", m.mem_gib) << " GiB memory; " << threads << " OpenMP threads"
+     << (m.load.empty() ? "" : "; 1-minute load average " + m.load + " when it started")
+     << "\n";
+  if (!m.commit.empty())
+    md << "- **Source:** commit `" << m.commit << "`"
+       << (m.dirty ? " with uncommitted changes in engine/, nodes/ or app/" : "") << "\n";
+  return md.str();
+}
+
+std::string quote_arg(const std::string& a) {
+  if (!a.empty() && a.find_first_of(" \t\"'$\\*?;&|<>()") == std::string::npos) return a;
+  std::string q = "'";
+  for (char ch : a) q += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
+  return q + "'";
+}
+
+}  // namespace bench
+
+namespace {
+
+using namespace bench;
+
+constexpr int kQuickFrames = 12;
+
+// ---------------------------------------------------------------------------------------------
+// Sweeps
+
+BenchSetting parse_setting(const nlohmann::json& j, const std::string& file, const std::string& ptr) {
+  if (!j.is_array() || j.size() != 2 || !j[0].is_number_integer() || !j[1].is_number_integer())
+    throw LoadError(file, ptr, "expected [substeps, iterations] (two integers)");
+  BenchSetting s{j[0].get<int>(), j[1].get<int>()};
+  if (s.substeps < 1 || s.iterations < 1)
+    throw LoadError(file, ptr, "substeps and iterations must be at least 1");
+  return s;
+}
+
+std::vector<Override> setting_overrides(const BenchSetting& s) {
+  return {Override{"solver", "substeps", std::to_string(s.substeps)},
+          Override{"grains", "constraint_iterations", std::to_string(s.iterations)}};
+}
+
+std::string sweep_path_for(const std::string& graph_path) {
+  fs::path p(graph_path);
+  return (p.parent_path() / (p.stem().string() + ".sweep.json")).string();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -550,13 +621,6 @@ void write_pareto_png(const std::vector<std::vector<BenchRow>>& scenes, const st
 // ---------------------------------------------------------------------------------------------
 // CSV and Markdown
 
-std::string fmt(const char* f, double v) {
-  if (!std::isfinite(v)) return "nan";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
-
 void write_csv(const std::vector<std::vector<BenchRow>>& scenes, const std::string& path) {
   std::ofstream out(path);
   if (!out) throw std::runtime_error(path + ": cannot write");
@@ -576,19 +640,6 @@ void write_csv(const std::vector<std::vector<BenchRow>>& scenes, const std::stri
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
-std::string si(double v) {  // 1.23e7 -> "12.3 M"
-  if (!std::isfinite(v)) return "nan";
-  const char* unit[] = {"", " k", " M", " G"};
-  int u = 0;
-  while (std::fabs(v) >= 1000 && u < 3) {
-    v /= 1000;
-    ++u;
-  }
-  char buf[32];
-  std::snprintf(buf, sizeof buf, v >= 100 ? "%.0f%s" : "%.3g%s", v, unit[u]);
-  return buf;
-}
-
 void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const BenchOptions& o,
                     const Machine& m, int threads, const std::string& path) {
   std::ostringstream md;
@@ -596,14 +647,7 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
      << "Speed against error for the `grains` PBD solver (DESIGN §7), written by `grains bench`"
      << " (see `bench/README.md`). Regenerate with:\n\n"
      << "```\n" << o.command << "\n```\n\n"
-     << "- **Date:** " << m.date << "\n"
-     << "- **Machine:** " << m.cpu << ", " << m.cores << " cores, "
-     << fmt("%.1f", m.mem_gib) << " GiB memory; " << threads << " OpenMP threads"
-     << (m.load.empty() ? "" : "; 1-minute load average " + m.load + " when it started")
-     << "\n";
-  if (!m.commit.empty())
-    md << "- **Source:** commit `" << m.commit << "`"
-       << (m.dirty ? " with uncommitted changes in engine/, nodes/ or app/" : "") << "\n";
+     << machine_markdown(m, threads);
   if (o.quick) md << "- **Quick mode** (`--quick`): a reduced sweep, not the full benchmark\n";
   md << "\nColumns: *s/frame* is stepping time only (no file output, no diagnostics); "
         "*particle-iter/s* is the sum over substeps of points x constraint iterations divided by "
@@ -635,6 +679,14 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
          << fmt("%.3g", r.max_strain) << " | " << fmt("%+.3g", r.energy_drift) << " | "
          << si(r.ci_per_s()) << " |\n";
   }
+  // the features section belongs to `grains bench --features`: carry it over unchanged
+  if (fs::exists(path)) {
+    std::ifstream in(path);
+    std::ostringstream old;
+    old << in.rdbuf();
+    std::string section = features_section_of(old.str());
+    if (!section.empty()) md << "\n" << section;
+  }
   fs::path p(path);
   if (p.has_parent_path()) fs::create_directories(p.parent_path());
   std::ofstream out(path);
@@ -643,14 +695,8 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
-std::string quote_arg(const std::string& a) {
-  if (!a.empty() && a.find_first_of(" \t\"'$\\*?;&|<>()") == std::string::npos) return a;
-  std::string q = "'";
-  for (char ch : a) q += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
-  return q + "'";
-}
-
 }  // namespace
+
 
 // ---------------------------------------------------------------------------------------------
 
@@ -712,6 +758,7 @@ const char* bench_csv_header() {
 }
 
 int run_bench(const BenchOptions& o) {
+  if (o.features) return run_feature_bench(o);
   // scenes
   std::vector<std::string> paths = o.scenes;
   if (paths.empty()) {
@@ -730,11 +777,7 @@ int run_bench(const BenchOptions& o) {
   std::vector<std::string> names;
   for (const auto& p : paths) {
     Graph g = load_graph(p);
-    int solver = g.find("solver"), grains = g.find("grains");
-    if (solver < 0 || g.nodes[solver].type != "solver")
-      throw LoadError(p, "/nodes", "bench scenes need a solver node named `solver` (bench/README.md)");
-    if (grains < 0 || g.nodes[grains].type != "grains")
-      throw LoadError(p, "/nodes", "bench scenes need a grains node named `grains` (bench/README.md)");
+    check_bench_scene(g, p);
     load_graph(p, setting_overrides({1, 1}));  // the overrides apply
     BenchSweep s = load_bench_sweep(p);
     if (o.quick) s = quick_bench_sweep(s);
@@ -769,7 +812,9 @@ int run_bench(const BenchOptions& o) {
       row.reference = st == sw.reference;
       std::vector<KeyedPos> pos;
       double pscale = 0;
-      int rc = run_setting(paths[s], st, sw.frames, threads, o.out_dir, row, pos, pscale);
+      std::string label = std::to_string(st.substeps) + "x" + std::to_string(st.iterations);
+      int rc = run_child(paths[s], setting_overrides(st), label, sw.frames, threads, o.out_dir, row,
+                         pos, pscale);
       if (rc != 0) {
         if (rc == 2) return 2;
         ++failures;
@@ -813,12 +858,21 @@ int run_bench(const BenchOptions& o) {
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o, int argc, char** argv) {
   auto* b = app.add_subcommand("bench", "speed versus error: run benchmark scenes at several settings");
   b->add_option("scenes", o.scenes, "scene graphs (default: every bench/*.json here)");
-  b->add_option("--out", o.out_dir, "output folder for results.csv and pareto.png (default out/bench)");
+  b->add_option("--out", o.out_dir, "output folder for results.csv and pareto.png, or features.csv (default out/bench)");
   b->add_option("--md", o.md_path, "Markdown report to regenerate (default BENCHMARKS.md)");
-  b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds");
+  b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds (with --features: at most 12 frames)");
   b->add_option("--frames", o.frames, "frames per run (default: the sweep file's or the graph's)")
       ->check(CLI::PositiveNumber);
   b->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  auto* features = b->add_flag(
+      "--features", o.features,
+      "instead of the sweep: the cost of each grains feature on one scene as written (default "
+      "bench/settle_100k.json); writes features.csv and the report's features section");
+  std::string names;
+  for (const auto& f : bench_features()) names += (names.empty() ? "" : ", ") + f.name;
+  b->add_option("--only", o.only, "with --features: only these features (comma-separated): " + names)
+      ->delimiter(',')
+      ->needs(features);
   std::string cmd;
   for (int k = 0; k < argc; ++k) cmd += (k ? " " : "") + quote_arg(argv[k]);
   o.command = cmd;

@@ -44,6 +44,9 @@ struct BenchOptions {
   int frames = 0;   // > 0 overrides every scene's frame count
   int threads = 0;  // <= 0: every core
   std::string command;  // the command line, for the report
+  // --features: the feature-cost table (app/bench_features.h) instead of the sweep
+  bool features = false;
+  std::vector<std::string> only;  // --only: those features (empty: all)
 };
 
 // One row of results.csv.
@@ -74,7 +77,7 @@ struct BenchRow {
 // The documented header of results.csv.
 const char* bench_csv_header();
 
-// Runs the benchmark; returns the process exit code (0 ok, 2 bad input, 1 a run failed).
+// Runs the benchmark (the feature-cost table with options.features); returns the process exit code (0 ok, 2 bad input, 1 a run failed).
 // Throws LoadError for a bad scene or sidecar (before any run starts).
 int run_bench(const BenchOptions& options);
 

@@ -19,8 +19,10 @@
 // Explicit constraints join the iterations through a per-grain adjacency (CSR rows of (other
 // endpoint, primitive)) built once per substep from the primitives, so each grain gathers its own
 // constraint corrections like its contacts.
-// Every loop over grains is `omp parallel for schedule(static)` and each grain writes only its
-// own slots, so the result is bit-identical for any thread count; stats are reduced serially.
+// Every loop over grains is an `omp parallel for` in which each grain writes only its own slots,
+// so the result is bit-identical for any thread count and any schedule: the Jacobi iterations and
+// the friction pass take chunks dynamically (crowded and empty regions cost differently), the
+// rest is static; stats are reduced serially.
 #include "nodes/grains/solver.h"
 
 #include <omp.h>
@@ -602,7 +604,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     {
       gr_normal_sums mine = acc;  // this thread's row scratch
       if (mine.pair_iteration) mine.pair_iteration += row_length_ * size_t(omp_get_thread_num());
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 256)
       for (long i = 0; i < ln; ++i) {
         int ii = static_cast<int>(i);
         gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &mine));
@@ -614,7 +616,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (pair_friction_pass || collider_friction_pass) {
     const float* p = p_.data();
     float* next = p_next_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
       int ii = static_cast<int>(i);
       gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));

@@ -661,6 +661,25 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
         "*constraint-iter/s* is the sum over substeps of explicit constraints x iterations divided "
         "by the stepping time. The reference row (**ref**) has error 0 by definition. "
         "The plot `pareto.png` in the output folder draws s/frame against error.\n";
+  // scaling: every scene's 2 x 20 run side by side (the setting the settling scenes share)
+  {
+    std::ostringstream rows_md;
+    for (const auto& rows : scenes)
+      for (const auto& r : rows)
+        if (r.setting == BenchSetting{2, 20}) {
+          rows_md << "| " << r.scene << " | " << r.points << " | " << fmt("%.4g", r.s_per_frame())
+                  << " | " << si(r.pi_per_s()) << " | " << fmt("%.1f", r.peak_mib) << " | "
+                  << fmt("%.0f", r.bytes_per_grain) << " | " << fmt("%.3g", r.mean_penetration)
+                  << " |\n";
+          break;
+        }
+    if (!rows_md.str().empty())
+      md << "\n## Scaling at 2 x 20\n\n"
+         << "Each scene's 2 substeps x 20 iterations row, from the tables below.\n\n"
+         << "| scene | grains | s/frame | particle-iter/s | peak MiB | B/grain | mean pen |\n"
+         << "| --- | ---: | ---: | ---: | ---: | ---: | ---: |\n"
+         << rows_md.str();
+  }
   for (const auto& rows : scenes) {
     if (rows.empty()) continue;
     const BenchRow& f = rows.front();

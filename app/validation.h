@@ -102,7 +102,8 @@ struct SiloResult {
   double rate = 0;             // grains / s over the window (least squares)
   double rate_first = 0, rate_second = 0;  // over the window's halves: steadiness
   double r2 = 0;               // of the count's linear fit over the window
-  double number_density = 0;   // grains / m^3 in the silo's upper middle at t_start
+  double number_density = 0;   // grains / m^3 in the silo at t_start (grains over silo volume
+                               // up to the fill's 95th-percentile height)
   double drained = 0;          // fraction of the grains gone by t_end
   int frames = 0;
   double seconds = 0;

@@ -68,7 +68,7 @@ PileSlope pile_slope(const ParticleStore& pts, double cx, double cz, double d, d
 
 // Common solver settings of a run.
 struct LawSettings {
-  double d = 0.02;       // grain diameter = source separation = particle_separation (m)
+  double d = 0.02;  // grain diameter = source separation = particle_separation (m)
   int substeps = 8;
   int iterations = 40;
   double friction = 0.5;  // grains.friction_with_particles
@@ -78,16 +78,16 @@ struct LawSettings {
 // R0 = radius_grains d and height H0 = round(aspect radius_grains) d is released at once on a
 // rough floor; run-out (R_inf - R0) / R0 measured by deposit_radius once the deposit stopped.
 struct CollapseResult {
-  double aspect = 0;          // H0 / R0 as built
-  double r0 = 0, h0 = 0;      // m
+  double aspect = 0;      // H0 / R0 as built
+  double r0 = 0, h0 = 0;  // m
   size_t grains = 0;
-  double r0_measured = 0;     // deposit_radius of the column at the end of frame 1 (m)
-  double r_inf = 0;           // deposit_radius at the last frame (m)
-  double r_inf_earlier = 0;   // the same 0.25 s before: the run-out had stopped if they agree
-  double runout = 0;          // (r_inf - r0) / r0
-  double h_inf = 0;           // final deposit height (m)
+  double r0_measured = 0;    // deposit_radius of the column at the end of frame 1 (m)
+  double r_inf = 0;          // deposit_radius at the last frame (m)
+  double r_inf_earlier = 0;  // the same 0.25 s before: the run-out had stopped if they agree
+  double runout = 0;         // (r_inf - r0) / r0
+  double h_inf = 0;          // final deposit height (m)
   int frames = 0;
-  double seconds = 0;         // wall time of the run
+  double seconds = 0;  // wall time of the run
 };
 CollapseResult run_collapse(const std::string& scene, double aspect, int radius_grains,
                             const LawSettings& s, int threads);
@@ -97,14 +97,14 @@ CollapseResult run_collapse(const std::string& scene, double aspect, int radius_
 // fall through are killed. The discharge rate is the slope of the grain count over the window
 // [t_start, t_end] (s).
 struct SiloResult {
-  double orifice = 0;          // D (m)
-  size_t grains = 0;           // at the start
-  double rate = 0;             // grains / s over the window (least squares)
+  double orifice = 0;                      // D (m)
+  size_t grains = 0;                       // at the start
+  double rate = 0;                         // grains / s over the window (least squares)
   double rate_first = 0, rate_second = 0;  // over the window's halves: steadiness
-  double r2 = 0;               // of the count's linear fit over the window
-  double number_density = 0;   // grains / m^3 in the silo at t_start (grains over silo volume
-                               // up to the fill's 95th-percentile height)
-  double drained = 0;          // fraction of the grains gone by t_end
+  double r2 = 0;                           // of the count's linear fit over the window
+  double number_density = 0;  // grains / m^3 in the silo at t_start (grains over silo volume
+                              // up to the fill's 95th-percentile height)
+  double drained = 0;         // fraction of the grains gone by t_end
   int frames = 0;
   double seconds = 0;
 };
@@ -123,8 +123,8 @@ struct BeverlooFit {
   double k_linear = 0, r2_linear = 0;
   double exponent_free = 0, k_free = 0, r2_free = 0;  // n and k together (k in [0, D_min/d)):
                                                       // ill-conditioned over D/d = 5..9
-  double c = 0;           // mean of rate / (n_b sqrt(g) (D - 1.4 d)^2.5): C at n = 2.5, k = 1.4
-  double c_spread = 0;    // max - min of that ratio over the orifices
+  double c = 0;         // mean of rate / (n_b sqrt(g) (D - 1.4 d)^2.5): C at n = 2.5, k = 1.4
+  double c_spread = 0;  // max - min of that ratio over the orifices
 };
 BeverlooFit fit_beverloo(const std::vector<SiloResult>& runs, double d);
 
@@ -142,9 +142,9 @@ struct ReposeResult {
   int frames = 0;
 };
 struct ReposeSize {
-  int hopper_grains = 12;  // inner width / d
-  int fill_grains = 18;    // fill height / d
-  int orifice_grains = 6;  // hole / d
+  int hopper_grains = 12;      // inner width / d
+  int fill_grains = 18;        // fill height / d
+  int orifice_grains = 6;      // hole / d
   double hopper_floor = 0.36;  // m
   double bed_radius = 0.45;    // m, of the rough bed kept (the file's is 0.6 m)
   int frames = 144;
@@ -160,9 +160,9 @@ struct ValidationPlan {
   // (substeps, iterations) each experiment runs at: 8 x 40 (bench's converged reference) and,
   // in the full plan, 4 x 20 (bench's working setting) beside it
   std::vector<std::pair<int, int>> solver_settings;
-  std::vector<double> aspects;   // column collapse aspect ratios
+  std::vector<double> aspects;  // column collapse aspect ratios
   int column_radius_grains = 10;
-  std::vector<int> orifices;     // D / d
+  std::vector<int> orifices;  // D / d
   SiloSize silo;
   std::vector<double> frictions;  // angle of repose
   ReposeSize pile;
@@ -180,11 +180,11 @@ struct ValidationOptions {
   std::string out_dir = "out/validation";
   std::string md_path = "VALIDATION.md";
   bool quick = false;
-  int threads = 0;                 // <= 0: every core
-  std::vector<std::string> only;   // empty: all of collapse, silo, repose
+  int threads = 0;                   // <= 0: every core
+  std::vector<std::string> only;     // empty: all of collapse, silo, repose
   int substeps = 0, iterations = 0;  // > 0: replace the plan's solver setting
   double friction = -1;              // >= 0: replace the plan's friction (collapse and silo)
-  std::string command;             // the command line, for the report
+  std::string command;               // the command line, for the report
 };
 
 // Runs the plan; writes DIR/validation.csv and the Markdown report. Returns the exit code

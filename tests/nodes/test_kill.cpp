@@ -14,7 +14,8 @@ namespace {
 ParticleStore after_kill(const std::string& params) {
   std::string g = R"({"grains_graph": 1, "frames": 1, "nodes": [
       {"name": "src", "type": "source", "params": {"shape": "box", "size": [2.05, 2.05, 2.05], "separation": 0.1}},
-      {"name": "k", "type": "kill", "inputs": ["src"], "params": )" + params + R"(},
+      {"name": "k", "type": "kill", "inputs": ["src"], "params": )" +
+                  params + R"(},
       {"name": "s", "type": "solver", "inputs": ["k"]}]})";
   Simulation sim(test::graph_from(g));
   sim.step_frame();
@@ -41,7 +42,7 @@ TEST_CASE("kill cylinder: a vertical cylinder of radius and height size.y", "[no
     CHECK(std::fabs(P[3 * k + 1]) <= 0.5f + 1e-5f);
   }
   // without invert the same cylinder is removed and everything else stays
-  ParticleStore rest =
-      after_kill(R"({"shape": "cylinder", "center": [0, 0, 0], "radius": 0.45, "size": [0, 1.0, 0]})");
+  ParticleStore rest = after_kill(
+      R"({"shape": "cylinder", "center": [0, 0, 0], "radius": 0.45, "size": [0, 1.0, 0]})");
   CHECK(rest.size() == 20u * 20u * 20u - static_cast<size_t>(per_layer * 10));
 }

@@ -9,7 +9,8 @@
 
 using namespace grains;
 
-TEST_CASE("angle of repose: rises with friction, in the DEM range for spheres", "[validation][repose]") {
+TEST_CASE("angle of repose: rises with friction, in the DEM range for spheres",
+          "[validation][repose]") {
   register_builtin_nodes();
   ValidationPlan plan = validation_plan(true);
   LawSettings s = plan.settings;
@@ -21,8 +22,8 @@ TEST_CASE("angle of repose: rises with friction, in the DEM range for spheres", 
 
   for (const auto& r : runs) {
     INFO("friction " << r.friction << ": " << r.slope.angle_deg << " deg (sector spread "
-                     << r.slope.spread_deg << ", 1 s earlier " << r.slope_earlier.angle_deg
-                     << "), " << r.grains - r.left_in_hopper << " grains poured");
+                     << r.slope.spread_deg << ", 1 s earlier " << r.slope_earlier.angle_deg << "), "
+                     << r.grains - r.left_in_hopper << " grains poured");
     // a pile formed: most of the hopper emptied and every sector's flank could be fitted
     CHECK(r.left_in_hopper < r.grains / 2);
     CHECK(r.slope.sectors == 8);

@@ -6,8 +6,8 @@
 // laws themselves are CHECK_NOFAIL: our solver does not follow them yet (the run-out is about
 // half of Lube's and grows like a^1, not a^(1/2); see README), so they print their miss
 // without failing, and start passing silently when the solver does.
-#include <catch2/catch.hpp>
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 
 #include "app/validation.h"
@@ -15,7 +15,8 @@
 
 using namespace grains;
 
-TEST_CASE("column collapse: run-out against Lube 2004 and Lajeunesse 2004", "[validation][collapse]") {
+TEST_CASE("column collapse: run-out against Lube 2004 and Lajeunesse 2004",
+          "[validation][collapse]") {
   register_builtin_nodes();
   ValidationPlan plan = validation_plan(true);
   LawSettings s = plan.settings;
@@ -23,7 +24,8 @@ TEST_CASE("column collapse: run-out against Lube 2004 and Lajeunesse 2004", "[va
   s.iterations = plan.solver_settings.front().second;
   std::string scene = test::source_dir() + "/bench/validation/column_collapse.json";
   std::vector<CollapseResult> runs;
-  for (double a : plan.aspects) runs.push_back(run_collapse(scene, a, plan.column_radius_grains, s, 0));
+  for (double a : plan.aspects)
+    runs.push_back(run_collapse(scene, a, plan.column_radius_grains, s, 0));
 
   double resolution = s.d / 4;  // deposit_radius's own scatter on lattice columns (test_measures)
   for (const auto& r : runs) {
@@ -49,7 +51,8 @@ TEST_CASE("column collapse: run-out against Lube 2004 and Lajeunesse 2004", "[va
   for (const auto& r : runs) {
     double lo = 0.85 * std::min(lube2004_runout(r.aspect), lajeunesse2004_runout(r.aspect));
     double hi = 1.15 * std::max(lube2004_runout(r.aspect), lajeunesse2004_runout(r.aspect));
-    INFO("a = " << r.aspect << ": run-out " << r.runout << ", published band " << lo << " - " << hi);
+    INFO("a = " << r.aspect << ": run-out " << r.runout << ", published band " << lo << " - "
+                << hi);
     CHECK_NOFAIL((r.runout >= lo && r.runout <= hi));
   }
   // above a = 1.7 both find run-out ~ a^(1/2) (Larrieu et al. 2006: 0.52); with two aspect

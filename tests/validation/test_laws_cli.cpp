@@ -27,14 +27,17 @@ TEST_CASE("laws writes validation.csv and the Markdown report", "[validation][cl
   // two sources per aspect ratio, and the exponent above a = 1.7
   CHECK(rows == 2 * static_cast<int>(validation_plan(true).aspects.size()) + 1);
   std::string report = read_text(md);
-  CHECK_THAT(report, Catch::Contains("| law | source | expected | ours | difference | grains | settings | wall s |"));
+  CHECK_THAT(report,
+             Catch::Contains(
+                 "| law | source | expected | ours | difference | grains | settings | wall s |"));
   CHECK_THAT(report, Catch::Contains("Lube et al. 2004"));
   CHECK_THAT(report, Catch::Contains("### Column collapse, 1x5"));
 }
 
 TEST_CASE("laws exits with 2 when a scene is missing", "[validation][cli]") {
   std::string dir = temp_dir("laws_bad");
-  CHECK(run_grains("laws --quick --scenes " + dir + "/nowhere --out " + dir + " --md " + dir + "/V.md",
-                   dir + "/log") == 2);
+  CHECK(run_grains(
+            "laws --quick --scenes " + dir + "/nowhere --out " + dir + " --md " + dir + "/V.md",
+            dir + "/log") == 2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("nowhere"));
 }

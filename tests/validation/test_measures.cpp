@@ -34,8 +34,7 @@ std::vector<Vec3> lattice_column(int radius_cells, int layers, double d) {
     for (int i = -radius_cells; i < radius_cells; ++i)
       for (int k = -radius_cells; k < radius_cells; ++k) {
         double x = (i + 0.5) * d, z = (k + 0.5) * d;
-        if (x * x + z * z <= r0 * r0)
-          out.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
+        if (x * x + z * z <= r0 * r0) out.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
       }
   return out;
 }

@@ -2,6 +2,7 @@
 #include "app/cli.h"
 
 #include "app/bench.h"
+#include "app/validation.h"
 
 #include <omp.h>
 #include <unistd.h>
@@ -185,6 +186,9 @@ int cli_main(int argc, char** argv) {
   BenchOptions bench_opts;
   auto* bench = add_bench_command(app, bench_opts, argc, argv);
 
+  ValidationOptions laws_opts;
+  auto* laws = add_validation_command(app, laws_opts, argc, argv);
+
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
 
@@ -214,6 +218,7 @@ int cli_main(int argc, char** argv) {
       return 0;
     }
     if (bench->parsed()) return run_bench(bench_opts);
+    if (laws->parsed()) return run_validation(laws_opts);
     if (render->parsed()) return viewer::render_command(render_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,

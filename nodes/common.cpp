@@ -15,6 +15,8 @@ bool inside_region(const std::string& shape, const Vec3& c, const Vec3& size, fl
                    const Vec3& p) {
   Vec3 d = p - c;
   if (shape == "sphere") return dot(d, d) <= radius * radius;
+  if (shape == "cylinder")
+    return d.x * d.x + d.z * d.z <= radius * radius && std::fabs(d.y) <= size.y * 0.5f;
   return std::fabs(d.x) <= size.x * 0.5f && std::fabs(d.y) <= size.y * 0.5f &&
          std::fabs(d.z) <= size.z * 0.5f;
 }

@@ -21,7 +21,8 @@ inline float rand01(uint64_t seed, uint64_t counter) {
 // Resolves a path relative to the graph's folder.
 std::string resolve_path(const std::string& base_dir, const std::string& path);
 
-// Region test shared by group and kill: "box" (center, full size) or "sphere" (center, radius).
+// Region test shared by group and kill: "box" (center, full size), "sphere" (center, radius) or
+// "cylinder" (vertical: axis along y through center, radius, height size.y; kill only).
 bool inside_region(const std::string& shape, const Vec3& center, const Vec3& size, float radius,
                    const Vec3& p);
 

@@ -34,10 +34,11 @@ void register_kill_node() {
   t.doc = "Deletes points inside a region (or outside it, with invert).";
   t.params = {
       ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
-      ParamDecl::Menu("shape", {"box", "sphere"}, "box", "region shape"),
+      ParamDecl::Menu("shape", {"box", "sphere", "cylinder"}, "box",
+                      "region shape; cylinder: vertical axis through center, radius, height size.y"),
       ParamDecl::Vector("center", {0, -10, 0}, "centre of the region").unit("m"),
-      ParamDecl::Vector("size", {100, 10, 100}, "full extents of the box").unit("m"),
-      ParamDecl::Float("radius", 1, "radius of the sphere").positive().unit("m"),
+      ParamDecl::Vector("size", {100, 10, 100}, "full extents of the box; size.y is the cylinder's height").unit("m"),
+      ParamDecl::Float("radius", 1, "radius of the sphere or cylinder").positive().unit("m"),
       ParamDecl::Toggle("invert", false, "kill the points outside the region instead"),
   };
   t.make = [] { return std::make_unique<KillNode>(); };

@@ -19,7 +19,6 @@ typedef uint gr_uint;
 #define gr_min(a, b) fmin((a), (b))
 #define gr_max(a, b) fmax((a), (b))
 #define GR_NULL 0
-#define GR_SIMD_SUM4(a, b, c, d)
 
 GR_INLINE gr_float3 gr_make3(float x, float y, float z) { return (float3)(x, y, z); }
 GR_INLINE gr_float3 gr_add(gr_float3 a, gr_float3 b) { return a + b; }
@@ -47,15 +46,6 @@ typedef unsigned int gr_uint;
 #define gr_min(a, b) gr_minf((a), (b))
 #define gr_max(a, b) gr_maxf((a), (b))
 #define GR_NULL 0
-
-/* A loop whose body only adds into the four named sums: the compiler may vectorise it and add
- * in lanes (OpenMP simd). The lane order is fixed by the build, not by the thread count. */
-#if defined(_OPENMP)
-#define GR_PRAGMA(x) _Pragma(#x)
-#define GR_SIMD_SUM4(a, b, c, d) GR_PRAGMA(omp simd reduction(+ : a, b, c, d))
-#else
-#define GR_SIMD_SUM4(a, b, c, d)
-#endif
 
 GR_INLINE float gr_minf(float a, float b) { return b < a ? b : a; }
 GR_INLINE float gr_maxf(float a, float b) { return b > a ? b : a; }

@@ -12,15 +12,6 @@ using namespace grains;
 using namespace grains::test;
 namespace fs = std::filesystem;
 
-namespace {
-std::vector<std::string> split(const std::string& s, char sep) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, sep);) out.push_back(item);
-  return out;
-}
-}  // namespace
-
 TEST_CASE("bench --quick writes results.csv, pareto.png and the Markdown table", "[bench]") {
   std::string dir = temp_dir("bench_quick");
   std::string scene = source_dir() + "/tests/data/bench_tiny.json";

@@ -45,4 +45,11 @@ std::string read_text(const std::string& path) {
 
 std::string source_dir() { return GRAINS_SOURCE_DIR; }
 
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, sep);) out.push_back(item);
+  return out;
+}
+
 }  // namespace grains::test

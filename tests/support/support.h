@@ -2,6 +2,7 @@
 #pragma once
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "engine/graph.h"
 #include "engine/simulation.h"
@@ -18,6 +19,8 @@ std::string write_file(const std::string& dir, const std::string& name, const st
 // Runs the grains binary with arguments; returns its exit code; output goes to `log`.
 int run_grains(const std::string& args, const std::string& log);
 std::string read_text(const std::string& path);
+// The fields of s between separators (a CSV line).
+std::vector<std::string> split(const std::string& s, char sep);
 std::string source_dir();
 
 }  // namespace grains::test

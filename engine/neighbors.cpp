@@ -29,8 +29,8 @@
 // a counting sort whose order inside a group does not matter (every list is sorted by unique keys
 // at the end); a final pass writes every list at its place in original-index order.
 //
-// Buffers. keys_: cell keys for the counting sort, then the per-thread list regions of the query
-// pass. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays. cell_start_:
+// Buffers. keys_: cell keys for the counting sort, then the store the query pass's chunks put
+// their lists in. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays. cell_start_:
 // cell starts, per-chunk list positions, per-slot counts, handed-over group starts and groups.
 // Per-thread scratch lives in a thread_local struct (the header has no per-thread member). All
 // keep their capacity, so nothing is allocated once sizes settle.
@@ -236,6 +236,7 @@ struct ThreadScratch {
   std::vector<uint64_t> keys;
   std::vector<uint32_t> ranges;
   std::vector<uint32_t> handed;
+  std::vector<uint32_t> list;  // the current chunk's kept lists
   size_t cap = 0, nhanded = 0;
 
   void reserve(size_t count) {
@@ -548,31 +549,34 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
 
   uint32_t* offsets = out.offsets.data();
   {
+    // the lists' store: its contents (the cell keys) are spent, so a growth frees first
     const size_t per = K > 0 ? std::min<size_t>(size_t(K), 24) : 24;
-    const size_t want = (n / size_t(T) + chunk) * per + 1024;
-    if (keys_.size() < want * size_t(T)) keys_.resize(want * size_t(T));
+    const size_t want = n * per + 1024;
+    if (keys_.size() < want) {
+      std::vector<uint32_t>().swap(keys_);
+      keys_.resize(want);
+    }
   }
-  size_t need[kMaxThreads];
+  size_t top = 0;  // the store's next free entry
   bool redo = false;
   auto kept_of = [K](uint32_t found) { return K > 0 ? std::min(found, uint32_t(K)) : found; };
 #pragma omp parallel num_threads(T)
   {
-    const int nt = omp_get_num_threads(), t = omp_get_thread_num();
     const double inf = std::numeric_limits<double>::infinity();
     ThreadScratch& ts = thread_scratch();
     uint32_t* chunk_pos = cell_start_.data() + at_chunks;
     uint32_t* found = cell_start_.data() + at_found;
     // 1. Queries. Consecutive slots in one cell form a run sharing one gather (the candidates
-    // around the run's bounding box). Each thread appends the kept lists to its own region of
-    // keys_; a region that overflows keeps counting, and the pass is redone with room.
+    // around the run's bounding box). A chunk's kept lists collect in the thread's scratch and
+    // then take the next free range of the shared store keys_ (where is timing-dependent, but
+    // only step 4 reads it, through chunk_pos); past the end the chunks keep counting, and the
+    // pass is redone with room.
     for (;;) {
-      const size_t cap = keys_.size() / size_t(nt);
-      uint32_t* region = keys_.data() + size_t(t) * cap;
-      size_t used = 0;
+      const size_t cap = keys_.size();
       ts.nhanded = 0;
 #pragma omp for schedule(dynamic, 1)
       for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {
-        chunk_pos[c] = uint32_t(size_t(t) * cap + used);
+        ts.list.clear();
         const uint32_t k0 = uint32_t(size_t(c) * chunk);
         const uint32_t k1 = uint32_t(std::min(n, size_t(c + 1) * chunk));
         int lq = 0;
@@ -607,20 +611,27 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
           const uint32_t hand_from = multi && lq + 1 < nlevels ? g.end : uint32_t(-1);
           for (; k < j; ++k) {
             const uint32_t m = S.test(k, count, hand_from, ts, &found[k]);
-            if (used + m <= cap)
-              for (uint32_t e = 0; e < m; ++e) region[used + e] = uint32_t(ts.keys[e]);
-            used += m;  // past cap: keep counting so the retry knows the size
+            for (uint32_t e = 0; e < m; ++e) ts.list.push_back(uint32_t(ts.keys[e]));
           }
         }
+        size_t pos;
+#pragma omp atomic capture
+        {
+          pos = top;
+          top += ts.list.size();
+        }
+        chunk_pos[c] = uint32_t(pos);
+        if (pos + ts.list.size() <= cap)  // past cap: keep counting so the retry knows the size
+          std::memcpy(keys_.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
       }
-      need[t] = used;
-#pragma omp barrier
 #pragma omp single
       {
-        size_t most = 0, total = 0;
-        for (int v = 0; v < nt; ++v) most = std::max(most, need[v]), total += need[v];
-        redo = most > cap;
-        if (redo) keys_.resize((std::max(most, total / size_t(nt)) * 3 / 2 + 4096) * size_t(nt));
+        redo = top > cap;
+        if (redo) {
+          std::vector<uint32_t>().swap(keys_);  // free first: the old lists are redone anyway
+          keys_.resize(top + top / 16 + 4096);
+        }
+        top = 0;
       }
       if (!redo) break;
     }

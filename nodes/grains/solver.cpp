@@ -427,6 +427,14 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   g.mass = mass_.data();
   g.radius = radius_.data();
   g.inv_mass = inv_mass_.data();
+  {
+    // equal grains: the contact loop's fast path reads neither radius nor inverse mass
+    const float r0 = radius_[0], w0 = inv_mass_[0];
+    bool uniform = r0 > 0 && w0 > 0 && std::isfinite(r0) && std::isfinite(w0);
+    for (size_t i = 1; uniform && i < n; ++i) uniform = radius_[i] == r0 && inv_mass_[i] == w0;
+    g.uniform_radius = uniform ? r0 : 0.0f;
+    g.uniform_inv_mass = uniform ? w0 : 0.0f;
+  }
   g.friction = d.friction;
   g.repulsionweight = d.repulsionweight;
   g.repulsionstiffness = d.repulsionstiffness;

@@ -112,6 +112,59 @@ GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int 
   }
 }
 
+/* gr_gather_contacts for equal grains (g->uniform_radius and g->uniform_inv_mass set): the
+ * summed radii are 2r and the share w / (w + w) = 1/2 for every pair, so a candidate costs only
+ * its position. The same arithmetic as the general loop with those values (the share is exactly
+ * 0.5 there too), so both give bit-identical results. */
+GR_HOT int gr_gather_contacts_uniform(const gr_grains* g, const GR_GLOBAL float* p, int i,
+                                      float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum) {
+  const float px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
+  const float rsum = g->uniform_radius + g->uniform_radius;
+  const float rsum2 = rsum * rsum;
+  const float half_repulse = 0.5f * repulse;
+  const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
+  const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
+  float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
+  gr_uint k;
+  int l;
+  for (l = 0; l < GR_LANES; ++l) lx[l] = ly[l] = lz[l] = lc[l] = 0.0f;
+  for (k = b; k < e; k += GR_LANES) {
+    for (l = 0; l < GR_LANES; ++l) {
+      const int live = k + (gr_uint)l < e;
+      const gr_uint kk = live ? k + (gr_uint)l : e - 1;
+      const int j = (int)nbr[kk];
+      const float dx = px - p[3 * j], dy = py - p[3 * j + 1], dz = pz - p[3 * j + 2];
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      const float dist = gr_sqrt(d2);
+      const int touching = (d2 < rsum2) & (j != i);
+      const float d = touching ? rsum - dist : 0.0f;
+      const float f = (touching & live) ? half_repulse * d : 0.0f;
+      const float along = dist > 0.0f ? f / dist : 0.0f;
+      const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
+      lx[l] += along * dx;
+      ly[l] += along * dy + apart_y;
+      lz[l] += along * dz;
+      lc[l] += f != 0.0f ? 1.0f : 0.0f;
+      ld[l] = d;
+    }
+    if (overlap_out)
+      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
+  }
+  {
+    float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;
+    for (l = 0; l < GR_LANES; ++l) {
+      sx += lx[l];
+      sy += ly[l];
+      sz += lz[l];
+      count += lc[l];
+    }
+    sum->x += sx;
+    sum->y += sy;
+    sum->z += sz;
+    return (int)count;
+  }
+}
+
 /* One Jacobi iteration's pair corrections of grain i (contacts, with friction when
  * `with_friction`, and clumping), read from the iterate p. Adds to *sum, returns how many
  * constraints produced a nonzero correction. When `overlap_out` is not null, overlap_out[k] receives
@@ -137,6 +190,8 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
         for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k - g->nbr_offsets[i]] = 0.0f;
       return 0;
     }
+    if (g->uniform_radius > 0.0f && g->uniform_inv_mass > 0.0f)
+      return gr_gather_contacts_uniform(g, p, i, repulse, overlap_out, sum);
     return gr_gather_contacts(g, p, i, repulse, overlap_out, sum);
   }
   gr_float3 acc = gr_make3(0.0f, 0.0f, 0.0f);

@@ -53,6 +53,10 @@ typedef struct {
   const GR_GLOBAL float* mass;     /* (n) kg */
   const GR_GLOBAL float* radius;   /* (n) m */
   const GR_GLOBAL float* inv_mass; /* (n) 1/kg: 1/mass, or 1/shockmass with global mass-shock */
+  /* > 0 when every grain has this radius and this inverse mass (equal grains, no global
+   * mass-shock): the contact loop then reads neither array per candidate. 0 otherwise. */
+  float uniform_radius;
+  float uniform_inv_mass;
   const GR_GLOBAL float* friction;            /* (n) optional */
   const GR_GLOBAL float* repulsionweight;     /* (n) optional */
   const GR_GLOBAL float* repulsionstiffness;  /* (n) optional */

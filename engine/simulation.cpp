@@ -196,14 +196,26 @@ void Simulation::step_frame() {
 
 namespace {
 
-// Touching pairs of spheres of one radius r, without neighbour lists: a counting sort into cells
-// 2r wide, then each point scans the 27 cells around its own for partners of higher index
-// (visit(i, j, rsum - distance) for every pair with rsum - distance > 0, in a fixed order).
-// Memory is three integers per point plus the cells. Returns false, having visited nothing, when
-// the box would need more than 8 cells per point (sparse outliers): the caller then uses the
-// general search.
-template <class Visit>
-bool touching_pairs_uniform(const float* P, size_t n, float r, Visit visit) {
+// Penetration statistics of touching pairs: the largest overlap / (r_i + r_j), and the sum and
+// count for the mean.
+struct PenetrationSums {
+  double sum = 0;
+  size_t count = 0;
+  float max = 0;
+  void add(float pen) {
+    max = std::max(max, pen);
+    sum += pen;
+    ++count;
+  }
+};
+
+// Penetration of spheres of one radius r, without neighbour lists: a counting sort into cells 2r
+// wide, then each point scans the 27 cells around its own for partners of higher index. Points
+// are taken in fixed blocks whose sums are added in block order, so the result is the same for
+// any thread count. Memory is three integers per point plus the cells. Returns false, having
+// measured nothing, when the box would need more than 8 cells per point (sparse outliers): the
+// caller then uses the general search.
+bool penetration_uniform(const float* P, size_t n, float r, PenetrationSums& total) {
   const float inf = std::numeric_limits<float>::infinity();
   float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
   for (size_t i = 0; i < n; ++i)
@@ -234,20 +246,33 @@ bool touching_pairs_uniform(const float* P, size_t n, float r, Visit visit) {
   for (size_t i = 0; i < n; ++i)
     if (key[i] != none) order[fill[key[i]]++] = uint32_t(i);
   const float rsum = 2.0f * r;
-  for (size_t i = 0; i < n; ++i) {
-    if (key[i] == none) continue;
-    const int64_t c[3] = {coord(i, 0), coord(i, 1), coord(i, 2)};
-    for (int64_t z = std::max<int64_t>(c[2] - 1, 0); z <= std::min(c[2] + 1, dim[2] - 1); ++z)
-      for (int64_t y = std::max<int64_t>(c[1] - 1, 0); y <= std::min(c[1] + 1, dim[1] - 1); ++y)
-        for (int64_t x = std::max<int64_t>(c[0] - 1, 0); x <= std::min(c[0] + 1, dim[0] - 1); ++x) {
-          const size_t cell = size_t((z * dim[1] + y) * dim[0] + x);
-          for (uint32_t k = start[cell]; k < start[cell + 1]; ++k) {
-            const uint32_t j = order[k];
-            if (j <= i) continue;
-            const float overlap = rsum - length(load3(P, i) - load3(P, j));
-            if (overlap > 0) visit(i, j, overlap);
+  constexpr size_t kBlock = 4096;
+  const ptrdiff_t blocks = ptrdiff_t((n + kBlock - 1) / kBlock);
+  std::vector<PenetrationSums> part(static_cast<size_t>(blocks));
+#pragma omp parallel for schedule(dynamic, 1)
+  for (ptrdiff_t b = 0; b < blocks; ++b) {
+    PenetrationSums acc;
+    for (size_t i = size_t(b) * kBlock; i < std::min(n, size_t(b + 1) * kBlock); ++i) {
+      if (key[i] == none) continue;
+      const int64_t c[3] = {coord(i, 0), coord(i, 1), coord(i, 2)};
+      for (int64_t z = std::max<int64_t>(c[2] - 1, 0); z <= std::min(c[2] + 1, dim[2] - 1); ++z)
+        for (int64_t y = std::max<int64_t>(c[1] - 1, 0); y <= std::min(c[1] + 1, dim[1] - 1); ++y)
+          for (int64_t x = std::max<int64_t>(c[0] - 1, 0); x <= std::min(c[0] + 1, dim[0] - 1); ++x) {
+            const size_t cell = size_t((z * dim[1] + y) * dim[0] + x);
+            for (uint32_t k = start[cell]; k < start[cell + 1]; ++k) {
+              const uint32_t j = order[k];
+              if (j <= i) continue;
+              const float overlap = rsum - length(load3(P, i) - load3(P, j));
+              if (overlap > 0) acc.add(overlap / rsum);
+            }
           }
-        }
+    }
+    part[size_t(b)] = acc;
+  }
+  for (const PenetrationSums& p : part) {
+    total.max = std::max(total.max, p.max);
+    total.sum += p.sum;
+    total.count += p.count;
   }
   return true;
 }
@@ -277,19 +302,12 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
     st.max_penetration = st.mean_penetration = 0;
     return;
   }
-  double sum = 0;
-  size_t count = 0;
-  float mx = 0;
+  PenetrationSums pen;
   bool uniform = true;
   for (size_t k = 1; k < n && uniform; ++k) uniform = r[k] == r[0];
-  if (uniform && touching_pairs_uniform(P, n, r[0], [&](size_t, size_t, float overlap) {
-        const float pen = overlap / (r[0] + r[0]);
-        mx = std::max(mx, pen);
-        sum += pen;
-        ++count;
-      })) {
-    st.max_penetration = mx;
-    st.mean_penetration = count ? static_cast<float>(sum / count) : 0.0f;
+  if (uniform && penetration_uniform(P, n, r[0], pen)) {
+    st.max_penetration = pen.max;
+    st.mean_penetration = pen.count ? static_cast<float>(pen.sum / pen.count) : 0.0f;
     return;
   }
   NeighborSearch search;
@@ -305,14 +323,11 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
       if (j <= i) continue;
       float rr = r[i] + r[j];
       float d = length(load3(P, i) - load3(P, j));
-      float pen = (rr - d) / rr;
-      if (pen <= 0) continue;
-      mx = std::max(mx, pen);
-      sum += pen;
-      ++count;
+      float p = (rr - d) / rr;
+      if (p > 0) pen.add(p);
     }
-  st.max_penetration = mx;
-  st.mean_penetration = count ? static_cast<float>(sum / count) : 0.0f;
+  st.max_penetration = pen.max;
+  st.mean_penetration = pen.count ? static_cast<float>(pen.sum / pen.count) : 0.0f;
 }
 
 FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)

@@ -246,7 +246,7 @@ bool penetration_uniform(const float* P, size_t n, float r, PenetrationSums& tot
   for (size_t i = 0; i < n; ++i)
     if (key[i] != none) order[fill[key[i]]++] = uint32_t(i);
   const float rsum = 2.0f * r;
-  constexpr size_t kBlock = 4096;
+  constexpr size_t kBlock = 1024;
   const ptrdiff_t blocks = ptrdiff_t((n + kBlock - 1) / kBlock);
   std::vector<PenetrationSums> part(static_cast<size_t>(blocks));
 #pragma omp parallel for schedule(dynamic, 1)

@@ -53,11 +53,17 @@ TEST_CASE("default graph: poured grains stay on the ground", "[graphs]") {
   check_above_ground(sim->object(0).pts);
 }
 
-TEST_CASE("sand_pile: a poured pile keeps a slope with friction and spreads flat without",
+TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads flat without",
           "[graphs]") {
-  // With friction the pile stands: grains near the axis are higher than those at its rim, and
-  // it stays compact. Without friction nothing holds a slope (angle of repose 0): the same pour
-  // runs out several times as far.
+  // The example runs 3 substeps x 20 iterations: too few to stack a pile at its angle of repose
+  // (the help page's stacking note; VALIDATION.md measures repose angles at 8 x 40), but with
+  // friction the grains still stack: the pile stands several layers deep and is highest at its
+  // core. Without friction nothing holds (angle of repose 0): the same pour runs out several
+  // times as far. Heights are those of resting grains only (speed under 0.3 m/s, below 0.2 m):
+  // the stream falls from 0.3 m, so any grain in it that has dropped more than 5 mm is faster
+  // (v^2 = 2 g h), and the just-emitted ones are above 0.2 m. The pile grows in avalanches, so
+  // the heights are averaged over frames 41-48 (about 700 grain-frames at the core, 6,500 at the
+  // rim).
   struct Pile {
     double inner = 0, outer = 0, reach90 = 0;
   };
@@ -67,32 +73,43 @@ TEST_CASE("sand_pile: a poured pile keeps a slope with friction and spreads flat
                          {parse_override("grains.friction_with_particles=" + friction),
                           parse_override("grains.friction_with_colliders=" + friction)});
     Simulation sim(g);
-    for (int f = 0; f < 48; ++f) sim.step_frame();
-    const ParticleStore& pts = sim.object(0).pts;
-    check_above_ground(pts);
-    const float* P = pts.v3_if("P");
     Pile pile;
     int ni = 0, no = 0;
-    std::vector<double> reach;
-    for (size_t k = 0; k < pts.size(); ++k) {
-      float y = P[3 * k + 1], rr = std::hypot(P[3 * k], P[3 * k + 2]);
-      if (y > 0.15f) continue;  // still falling
-      reach.push_back(rr);
-      if (rr < 0.04f) pile.inner += y, ++ni;
-      if (rr > 0.10f && rr < 0.2f) pile.outer += y, ++no;
+    for (int f = 1; f <= 48; ++f) {
+      sim.step_frame();
+      if (f <= 40) continue;
+      const ParticleStore& pts = sim.object(0).pts;
+      const float* P = pts.v3_if("P");
+      const float* v = pts.v3_if("v");
+      for (size_t k = 0; k < pts.size(); ++k) {
+        float y = P[3 * k + 1], rr = std::hypot(P[3 * k], P[3 * k + 2]);
+        if (y > 0.2f || length(load3(v, k)) > 0.3f) continue;
+        if (rr < 0.05f) pile.inner += y, ++ni;
+        if (rr > 0.10f && rr < 0.2f) pile.outer += y, ++no;
+      }
     }
+    const ParticleStore& pts = sim.object(0).pts;
+    check_above_ground(pts);
     pile.inner /= std::max(ni, 1);
     pile.outer /= std::max(no, 1);
+    std::vector<double> reach;
+    const float* P = pts.v3_if("P");
+    for (size_t k = 0; k < pts.size(); ++k)
+      if (P[3 * k + 1] <= 0.15f) reach.push_back(std::hypot(P[3 * k], P[3 * k + 2]));
     std::sort(reach.begin(), reach.end());
     pile.reach90 = reach[reach.size() * 9 / 10];
     return pile;
   };
+  const double r = 0.01;  // particle_separation / 2
   Pile rough = pour("1"), smooth = pour("0");
   INFO("friction 1: inner " << rough.inner << " outer " << rough.outer << " reach " << rough.reach90);
-  INFO("friction 0: reach " << smooth.reach90);
-  // a flat layer gives inner / outer = 1 to within a few percent (each mean is over hundreds of
-  // grains, which averages out their one-radius roughness); 1.2 asks for a real slope
-  CHECK(rough.inner > 1.2 * rough.outer);
+  INFO("friction 0: inner " << smooth.inner << " reach " << smooth.reach90);
+  // a monolayer rests at y = r: a core above 2.5 r has grains stacked on grains
+  CHECK(rough.inner > 2.5 * r);
+  // a layer of uniform depth gives inner / outer = 1 within about 1.3% (grain heights spread by
+  // about r within a layer; over 700 grain-frames the core mean is good to r / sqrt(700)), so
+  // 5% is a dome
+  CHECK(rough.inner > 1.05 * rough.outer);
   CHECK(smooth.reach90 > 3 * rough.reach90);
 }
 

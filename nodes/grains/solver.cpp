@@ -16,6 +16,9 @@
 //      stats.
 //   5. explicit constraints: strain from the end positions, breaking, remove strands (the caller
 //      removes the primitives marked dead).
+// Coordinates: a substep computes relative to local_origin (0 unless the grains' box is far from
+// the world origin compared with its size), so iterations on grains far away keep corrections
+// below the world coordinates' float step; colliders are queried at world positions.
 // Explicit constraints join the iterations through a per-grain adjacency (CSR rows of (other
 // endpoint, primitive)) built once per substep from the primitives, so each grain gathers its own
 // constraint corrections like its contacts.
@@ -133,6 +136,38 @@ void final_collision(const ColliderState* colliders, size_t collider_count, cons
 int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
   while (parent[a] != a) a = parent[a] = parent[parent[a]];
   return a;
+}
+
+// The origin a substep computes in. Float positions far from the world origin lose small
+// corrections (at 100 m one float step is 7.6e-6 m, so a hanging chain's per-iteration pulls
+// vanish and it stretches 4x more than at the origin). Along an axis where the grains' box lies
+// farther from 0 than twice its own size S (a power of two at least the box's largest extent),
+// the substep works relative to the box centre rounded to a multiple of S: few significant bits,
+// so most coordinates shift exactly. Near the origin the shift is 0 and nothing changes.
+Vec3 local_origin(const float* P, size_t n, int threads) {
+  const float inf = std::numeric_limits<float>::infinity();
+  float lx = inf, ly = inf, lz = inf, hx = -inf, hy = -inf, hz = -inf;
+  const long ln = static_cast<long>(n);
+#pragma omp parallel for schedule(static) num_threads(threads) \
+    reduction(min : lx, ly, lz) reduction(max : hx, hy, hz)
+  for (long i = 0; i < ln; ++i) {
+    const float x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
+    if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) continue;
+    lx = std::min(lx, x), hx = std::max(hx, x);
+    ly = std::min(ly, y), hy = std::max(hy, y);
+    lz = std::min(lz, z), hz = std::max(hz, z);
+  }
+  if (!(lx <= hx)) return {};
+  const double lo[3] = {lx, ly, lz}, hi[3] = {hx, hy, hz};
+  double extent = 0;
+  for (int a = 0; a < 3; ++a) extent = std::max(extent, hi[a] - lo[a]);
+  const double S = std::exp2(std::ceil(std::log2(std::max(extent, 1e-6))));
+  double o[3];
+  for (int a = 0; a < 3; ++a) {
+    const double centre = 0.5 * (lo[a] + hi[a]);
+    o[a] = std::fabs(centre) > 2 * S ? std::round(centre / S) * S : 0.0;
+  }
+  return {static_cast<float>(o[0]), static_cast<float>(o[1]), static_cast<float>(o[2])};
 }
 
 }  // namespace
@@ -313,8 +348,9 @@ void GrainsSolver::project_shapes(int threads) {
   }
 }
 
-void GrainsSolver::find_planes(const float* P, const float* p, const ColliderState* colliders,
-                               size_t collider_count, float query_scale, int threads) {
+void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origin,
+                               const ColliderState* colliders, size_t collider_count,
+                               float query_scale, int threads) {
   const long n = static_cast<long>(radius_.size());
   const float* radius = radius_.data();
   // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
@@ -323,8 +359,8 @@ void GrainsSolver::find_planes(const float* P, const float* p, const ColliderSta
   // candidates are kept, nearest first (ties by collider order). Two passes: count (row sizes),
   // then fill the compact rows; each grain writes only its own row.
   auto nearest = [&](long i, float* dist, Vec3* nrm, int32_t* idx) {
-    Vec3 x = load3(p, i);
-    float range = query_scale * radius[i] + length(x - load3(P, i));
+    Vec3 x = load3(p, i) + origin;  // colliders live in world space
+    float range = query_scale * radius[i] + length(load3(p, i) - load3(P, i));
     int count = 0;
     for (size_t c = 0; c < collider_count; ++c) {
       Vec3 nc;
@@ -372,8 +408,8 @@ void GrainsSolver::find_planes(const float* P, const float* p, const ColliderSta
     Vec3 x = load3(p, i);
     for (int k = 0; k < count; ++k) {
       const uint32_t e = offsets[i] + k;
-      Vec3 xs = x - nrm[k] * dist[k];
-      Vec3 vc = colliders[idx[k]].velocity_at(xs);
+      Vec3 xs = x - nrm[k] * dist[k];  // in the substep's coordinates
+      Vec3 vc = colliders[idx[k]].velocity_at(xs + origin);
       which[e] = idx[k];
       store3(plane + 9 * e, 0, xs);
       store3(plane + 9 * e, 1, nrm[k]);
@@ -390,14 +426,23 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   const long ln = static_cast<long>(n);
   const int threads = s.threads > 0 ? s.threads : omp_get_max_threads();
   const int iterations = std::max(0, s.constraint_iterations);
-  const gr_params prm = make_params(s);
   if (!(collider_count > 0 && colliders)) collider_count = 0;
+  // the substep's coordinates: world positions minus `origin` (local_origin; 0 near the origin)
+  const Vec3 origin = local_origin(d.P, n, threads);
+  const bool shifted = !(origin.x == 0 && origin.y == 0 && origin.z == 0);
+  gr_params prm = make_params(s);
+  prm.shock_origin_x -= origin.x;
+  prm.shock_origin_y -= origin.y;
+  prm.shock_origin_z -= origin.z;
 
-  // per-grain inputs the kernels read: radius, mass, inverse mass (or 1/shockmass)
+  // per-grain inputs the kernels read: start positions, radius, mass, inverse mass (or
+  // 1/shockmass)
   radius_.resize(n);
   mass_.resize(n);
   inv_mass_.resize(n);
-  P0_.assign(d.P, d.P + 3 * n);
+  P0_.resize(3 * n);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) store3(P0_.data(), i, load3(d.P, i) - origin);
   const float default_radius = 0.5f * s.particle_separation;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
@@ -406,7 +451,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     mass_[i] = m;
     if (s.mass_shock == MassShock::Global) {
       // written "prior to iterating" (help page), from the start-of-substep position
-      float sm = gr_shockmass(&prm, m, gr_load3(d.P, static_cast<int>(i)));
+      float sm = gr_shockmass(&prm, m, gr_load3(P0_.data(), static_cast<int>(i)));
       if (d.shockmass) d.shockmass[i] = sm;
       inv_mass_[i] = sm > 0 ? 1.0f / sm : 0.0f;
     } else {
@@ -443,6 +488,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // pins: off (costs nothing) without targetstiffness or with weight or stiffness 0
   if (d.targetstiffness && d.targetP && s.target_weight > 0 && s.target_stiffness > 0) {
     g.targetP = d.targetP;
+    if (shifted) {
+      target_local_.resize(3 * n);
+#pragma omp parallel for schedule(static) num_threads(threads)
+      for (long i = 0; i < ln; ++i) store3(target_local_.data(), i, load3(d.targetP, i) - origin);
+      g.targetP = target_local_.data();
+    }
     g.targetweight = d.targetweight;
     g.targetstiffness = d.targetstiffness;
   }
@@ -591,7 +642,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (pairs_on) find_pairs(true);
   if (colliders_on) {
-    find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+    find_planes(P0_.data(), p_.data(), origin, colliders, collider_count, s.neighbor_query_scale, threads);
     g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
   }
@@ -602,7 +653,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations)
     {
-      find_planes(d.P, p_.data(), colliders, collider_count, s.neighbor_query_scale, threads);
+      find_planes(P0_.data(), p_.data(), origin, colliders, collider_count, s.neighbor_query_scale, threads);
       g.plane_offsets = plane_offsets_.data();
       g.plane = plane_.data();
     }
@@ -642,12 +693,14 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       int ii = static_cast<int>(i);
       gr_float3 Pk, vk;
       gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
-      Vec3 b = to_vec(Pk), v = to_vec(vk);
+      // back to world space; a grain that stays (drift) keeps its world position exactly
+      const Vec3 a = load3(d.P, i), local = to_vec(Pk);
+      const bool stays = local.x == P0_[3 * i] && local.y == P0_[3 * i + 1] && local.z == P0_[3 * i + 2];
+      Vec3 b = stays ? a : local + origin, v = to_vec(vk);
       const Vec3 v_loop = v;
       int32_t hit = -1;
       Vec3 hit_n;
-      if (final_test)
-        final_collision(colliders, collider_count, load3(P0_.data(), i), b, v, radius_[i], &hit, &hit_n);
+      if (final_test) final_collision(colliders, collider_count, a, b, v, radius_[i], &hit, &hit_n);
       store3(d.P, i, b);
       store3(d.v, i, v);
       if (!impacts) continue;

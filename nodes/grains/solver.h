@@ -142,14 +142,18 @@ class GrainsSolver {
   void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
   void shape_goals(const float* p, int threads);
   void project_shapes(int threads);
-  void find_planes(const float* P, const float* p, const ColliderState* colliders,
-                   size_t collider_count, float query_scale, int threads);
+  // P, p in the substep's coordinates, world = those + origin
+  void find_planes(const float* P, const float* p, const Vec3& origin,
+                   const ColliderState* colliders, size_t collider_count, float query_scale,
+                   int threads);
 
   NeighborSearch search_;
   NeighborList neighbors_;
   // scratch, reused between substeps (n = grains this substep)
   std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
-  std::vector<float> P0_;           // (n x 3) m: P at the start of the substep
+  std::vector<float> P0_;           // (n x 3) m: P at the start of the substep, minus the
+                                    // substep's origin (local_origin in solver.cpp)
+  std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0
   // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
   std::vector<float> pair_normal_;     // (neighbour entries) m
   std::vector<float> pair_normal_it_;  // (threads x row_length_) m: this iteration's overlaps

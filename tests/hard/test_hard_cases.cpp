@@ -380,11 +380,10 @@ TEST_CASE("hard: a 1000-link chain hangs from its pin within the PBD stretch",
   // stiff at this cost; the check is that they stay a bounded elastic chain): with the sudden
   // load, the chain stays within 2.09 times those.
   // Why not stiffer: each iteration must lift every grain by delta / I, here 5.7e-6 m, three
-  // times half an ulp of the coordinates (1.9e-6 m below 64 m). The iterations add corrections
-  // to float positions, so a lift below half an ulp is lost and the chain sags until the
-  // stretch gradient makes it representable: at 20 x 50 (8.5e-7 m per iteration) the estimate
-  // is 3.4%, but pinned at y = 80 m the chain stretches 8.7% within 1 s; a 100-link chain at
-  // 20 x 50 settles at the estimate hanging from y = 5.5 m and 4x beyond it from y = 100 m.
+  // times half an ulp of coordinates below 64 m. A lift below half an ulp of the coordinates
+  // the substep works in is lost, and the chain sags until the stretch gradient makes it
+  // representable. The chain spans 50 m, so its own box is no help here (the substep shifts
+  // only a box far from the origin compared with its size; see the 100-link chain below).
   // The pin is fixed and nothing else acts but gravity: E may only fall (kRound for coordinates
   // up to 64 m). The pin holds: grain 0 stays within the top link's stretch of its target (it
   // averages the pin with one link, so it follows that link by a part of its error). Every
@@ -418,6 +417,71 @@ TEST_CASE("hard: a 1000-link chain hangs from its pin within the PBD stretch",
   CHECK(pin < kSuddenLoad * sag.top_link * h);
   CHECK(sim.object(0).pts.size() == static_cast<size_t>(N + 1));
   CHECK(sim.object(0).pts.prim_count() == static_cast<size_t>(N));
+}
+
+TEST_CASE("hard: a chain hanging 100 m up stretches as one near the origin",
+          "[hard][constraints][precision]") {
+  // 100 links of 5 cm at 20 substeps x 50 iterations: each iteration lifts a grain by about
+  // delta / I = 8.5e-7 m, under half an ulp of a coordinate near 100 m (3.8e-6 m), so iterating
+  // on world coordinates loses the lifts and the chain hung from y = 100 m stretched 4x the
+  // Jacobi estimate. The substep works relative to the grains' box (solver.cpp local_origin),
+  // where the lifts are representable as they are near the origin. What remains at 100 m is
+  // the stored end-of-substep position, rounded to 7.6e-6 m: at most one ulp per grain, i.e.
+  // 7.6e-6 / (N h) = 1.5e-6 of the chain's stretch, and per link ulp / h = 1.5e-4. So the
+  // steady stretch at y = 100 m matches the one at y = 5.5 m to within 10% of the estimate
+  // (3.4e-4, twice the per-link bound), where before it differed by 3x the estimate.
+  const int N = 100, substeps = 20, iterations = 50;
+  const float h = 0.05f, r = 0.02f;
+  const ChainSag sag = chain_sag(N, h, substeps, iterations);
+  auto steady_stretch = [&](float top) {
+    Graph g =
+        scene({{"constraint_iterations", iterations}, {"particle_separation", 2 * r}}, substeps);
+    Simulation sim(g);
+    sim.set_points(0, hanging_chain(N, h, r, top));
+    double sum = 0;
+    int count = 0;
+    run_frames(sim, 24, [&](int frame) {
+      if (frame <= 12) return;  // the sudden load's swing
+      const float* P = sim.object(0).pts.v3_if("P");
+      sum += (length(load3(P, N) - load3(P, 0)) - N * h) / (N * h);
+      ++count;
+    });
+    return sum / count;
+  };
+  const double low = steady_stretch(5.5f), high = steady_stretch(100.0f);
+  report("chain at 5.5 m: mean stretch over frames 13-24 / estimate", low / sag.total);
+  report("chain at 100 m: mean stretch over frames 13-24 / estimate", high / sag.total);
+  CHECK(std::fabs(high - low) < 0.1 * sag.total);
+}
+
+TEST_CASE("hard: a column 1 km from the origin on a ground plane moves as one at the origin",
+          "[hard][precision]") {
+  // The shifted substep's collider path: a 20-grain column at x = z = 1000 m is far from the
+  // origin along x and z only, so the substep shifts those axes by exactly 1000 (its box is
+  // a grain wide) and every grain sits at local x = z = 0. The ground's distance, the plane's
+  // surface point and the final collision pass then see the same y arithmetic as a column at
+  // the origin: y must match bit for bit, and x, z stay exactly 1000.
+  const int n = 20;
+  const float r = 0.01f;
+  auto run = [&](float at) {
+    Graph g = scene({{"constraint_iterations", 40}, {"particle_separation", 2 * r}}, 2,
+                    json::array({kGround}));
+    ParticleStore pts;
+    for (int k = 0; k < n; ++k) add_grain(pts, {at, r + 2 * r * k + 0.001f * k, at}, r);
+    Simulation sim(g);
+    sim.set_points(0, std::move(pts));
+    run_frames(sim, 24, [](int) {});
+    return sim.object(0).pts;
+  };
+  const ParticleStore near = run(0.0f), far = run(1000.0f);
+  const float *a = near.v3_if("P"), *b = far.v3_if("P");
+  for (int k = 0; k < n; ++k) {
+    INFO("grain " << k);
+    CHECK(b[3 * k + 1] == a[3 * k + 1]);
+    CHECK(b[3 * k] == 1000.0f);
+    CHECK(b[3 * k + 2] == 1000.0f);
+  }
+  report("column: top grain's height / (2 r n)", a[3 * (n - 1) + 1] / (2 * r * n));
 }
 
 TEST_CASE("hard: a stiff chain at one substep", "[hard][constraints]") {

@@ -599,7 +599,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // mixed radii small grains gather farther candidates and max_neighbors fills with them, so the
   // toggle is for scenes whose grains share one size (help page "Assume Uniform Radius").
   const float* search_radius = radius_.data();
-  if (s.assume_uniform_radius) {
+  if (s.assume_uniform_radius && !(g.uniform_radius > 0)) {  // equal radii need no copy
     float r_max = 0;
     for (size_t i = 0; i < n; ++i) r_max = std::max(r_max, radius_[i]);
     search_radius_.assign(n, r_max);

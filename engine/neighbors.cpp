@@ -25,15 +25,12 @@
 // small cells of small levels. Lists then merge what a particle found and what was handed to it.
 //
 // Determinism. A list depends only on the input: queries run over chunks of sorted slots (dynamic
-// schedule, for balance), each chunk taking the next free range of the output's storage and
-// noting where its lists went (so where a list lies depends on timing, its contents do not);
-// handed-over pairs are grouped by a counting sort whose order inside a group does not matter
-// (every list is sorted by unique keys at the end). With one level each list stays where its
-// query wrote it; with several, every list is rewritten, merged with what was handed to it, into
-// a compact region after the queries' storage, in original-index order.
+// schedule, for balance), each chunk noting where its lists went; handed-over pairs are grouped by
+// a counting sort whose order inside a group does not matter (every list is sorted by unique keys
+// at the end); a final pass writes every list at its place in original-index order.
 //
-// Buffers. keys_: cell keys for the counting sort. The query pass's chunks put their lists
-// straight into the output's `indices`. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays. cell_start_:
+// Buffers. keys_: cell keys for the counting sort, then the store the query pass's chunks put
+// their lists in. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays. cell_start_:
 // cell starts, per-chunk list positions, per-slot counts, handed-over group starts and groups.
 // Per-thread scratch lives in a thread_local struct (the header has no per-thread member). All
 // keep their capacity, so nothing is allocated once sizes settle.
@@ -427,10 +424,8 @@ struct Searcher {
 
 void NeighborSearch::find(const float* P, const float* radius, size_t n, const NeighborQuery& q,
                           NeighborList& out) {
-  out.begin.assign(n, 0u);
-  out.end.assign(n, 0u);
-  out.order.resize(n);
-  for (size_t i = 0; i < n; ++i) out.order[i] = uint32_t(i);
+  out.offsets.resize(n + 1);
+  out.offsets[0] = 0;
   if (n == 0) {
     out.indices.clear();
     return;
@@ -449,6 +444,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
   const float tmax =
       any_radius ? std::max(qs * (st.rmax + st.rmax), qs * (st.rmin + st.rmin)) : 0.0f;
   if (!(tmax > 0.0f)) {  // no pair can qualify
+    std::fill(out.offsets.begin(), out.offsets.end(), 0u);
     out.indices.clear();
     return;
   }
@@ -551,17 +547,17 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
     S.uniform_pre = t * t * kPreWiden;
   }
 
+  uint32_t* offsets = out.offsets.data();
   {
-    // the lists' storage: its old contents are spent, so a growth frees first
+    // the lists' store: its contents (the cell keys) are spent, so a growth frees first
     const size_t per = K > 0 ? std::min<size_t>(size_t(K), 24) : 24;
     const size_t want = n * per + 1024;
-    if (out.indices.size() < want) {
-      std::vector<uint32_t>().swap(out.indices);
-      out.indices.resize(want);
+    if (keys_.size() < want) {
+      std::vector<uint32_t>().swap(keys_);
+      keys_.resize(want);
     }
   }
-  size_t top = 0;   // the storage's next free entry
-  size_t used = 0;  // entries the queries took
+  size_t top = 0;  // the store's next free entry
   bool redo = false;
   auto kept_of = [K](uint32_t found) { return K > 0 ? std::min(found, uint32_t(K)) : found; };
 #pragma omp parallel num_threads(T)
@@ -572,10 +568,11 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
     uint32_t* found = cell_start_.data() + at_found;
     // 1. Queries. Consecutive slots in one cell form a run sharing one gather (the candidates
     // around the run's bounding box). A chunk's kept lists collect in the thread's scratch and
-    // then take the next free range of out.indices (where is timing-dependent, noted in
-    // chunk_pos); past the end the chunks keep counting, and the pass is redone with room.
+    // then take the next free range of the shared store keys_ (where is timing-dependent, but
+    // only step 4 reads it, through chunk_pos); past the end the chunks keep counting, and the
+    // pass is redone with room.
     for (;;) {
-      const size_t cap = out.indices.size();
+      const size_t cap = keys_.size();
       ts.nhanded = 0;
 #pragma omp for schedule(dynamic, 1)
       for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {
@@ -625,16 +622,14 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
         }
         chunk_pos[c] = uint32_t(pos);
         if (pos + ts.list.size() <= cap)  // past cap: keep counting so the retry knows the size
-          std::memcpy(out.indices.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
+          std::memcpy(keys_.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
       }
 #pragma omp single
       {
         redo = top > cap;
         if (redo) {
-          std::vector<uint32_t>().swap(out.indices);  // free first: the lists are redone anyway
-          out.indices.resize(top + top / 16 + 4096);
-        } else {
-          used = top;
+          std::vector<uint32_t>().swap(keys_);  // free first: the old lists are redone anyway
+          keys_.resize(top + top / 16 + 4096);
         }
         top = 0;
       }
@@ -669,43 +664,30 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
       // now group k is groups[gstart[k] .. gstart[k + 1])
     }
 
-    // 3 and 4. One level: each list stays where its query put it. Several: every list is
-    // merged with what was handed to it (keys rebuilt from the positions, exactly as the query
-    // made them) into a compact region after the queries' storage, in original-index order.
-    const uint32_t* base = cell_start_.data();
-    const uint32_t *cpos = base + at_chunks, *fnd = base + at_found;
-    if (!multi) {
+    // 3. Final counts, then offsets.
+    {
+      const uint32_t* base = cell_start_.data();
+      const uint32_t *fnd = base + at_found, *gstart = base + at_groups;
 #pragma omp for schedule(static)
-      for (ptrdiff_t k = 0; k < ptrdiff_t(n); ++k) out.order[k] = order[k];  // slot order
-#pragma omp for schedule(static)
-      for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {
-        uint32_t pos = cpos[c];
-        const size_t k1 = std::min(n, size_t(c + 1) * chunk);
-        for (size_t k = size_t(c) * chunk; k < k1; ++k) {
-          const uint32_t i = order[k];
-          out.begin[i] = pos;
-          pos += kept_of(fnd[k]);
-          out.end[i] = pos;
-        }
+      for (ptrdiff_t k = 0; k < ptrdiff_t(n); ++k) {
+        const uint32_t handed = multi ? gstart[k + 1] - gstart[k] : 0;
+        offsets[order[k] + 1] = kept_of(fnd[k] + handed);
       }
-    } else {
-      const uint32_t *gstart = base + at_groups, *groups = base + at_handed;
-#pragma omp for schedule(static)
-      for (ptrdiff_t k = 0; k < ptrdiff_t(n); ++k) out.order[k] = uint32_t(k);  // index order
-#pragma omp for schedule(static)
-      for (ptrdiff_t k = 0; k < ptrdiff_t(n); ++k)
-        out.end[order[k]] = kept_of(fnd[k] + (gstart[k + 1] - gstart[k]));  // lengths for now
+    }
 #pragma omp single
-      {
-        size_t at = used;
-        for (size_t i = 0; i < n; ++i) {
-          out.begin[i] = uint32_t(at);
-          at += out.end[i];
-          out.end[i] = uint32_t(at);
-        }
-        out.indices.resize(at);  // keeps the queries' lists below `used`
-      }
+    {
+      for (size_t i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
+      out.indices.resize(offsets[n]);
+    }
+
+    // 4. Each list to its place: a copy, or a merge with what was handed over (keys rebuilt
+    // from the positions, exactly as the query made them).
+    {
+      const uint32_t* base = cell_start_.data();
+      const uint32_t *cpos = base + at_chunks, *fnd = base + at_found, *gstart = base + at_groups,
+                     *groups = base + at_handed;
       uint32_t* dst = out.indices.data();
+      const uint32_t* src = keys_.data();
       // dynamic: the merges gather in the slots of the larger levels, at the end
 #pragma omp for schedule(dynamic, 1)
       for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {
@@ -713,15 +695,15 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
         const size_t k1 = std::min(n, size_t(c + 1) * chunk);
         for (size_t k = size_t(c) * chunk; k < k1; ++k) {
           const uint32_t i = order[k], own = kept_of(fnd[k]);
-          const uint32_t h0 = gstart[k], h1 = gstart[k + 1];
+          const uint32_t h0 = multi ? gstart[k] : 0, h1 = multi ? gstart[k + 1] : 0;
           if (h1 == h0) {
-            if (own) std::memcpy(dst + out.begin[i], dst + pos, own * sizeof(uint32_t));
+            if (own) std::memcpy(dst + offsets[i], src + pos, own * sizeof(uint32_t));
           } else {
             ts.reserve(own + (h1 - h0));
             uint64_t* mk = ts.keys.data();
             uint32_t m = 0;
             for (uint32_t e = 0; e < own; ++e) {
-              const uint32_t o = dst[pos + e];
+              const uint32_t o = src[pos + e];
               mk[m++] = pair_key(pair_dist2(X[k], Y[k], Z[k], P[3 * o], P[3 * o + 1], P[3 * o + 2]), o);
             }
             for (uint32_t h = h0; h < h1; ++h) {
@@ -729,7 +711,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
               mk[m++] = pair_key(pair_dist2(X[k], Y[k], Z[k], X[s], Y[s], Z[s]), order[s]);
             }
             m = finish_candidates(mk, m, K);
-            for (uint32_t e = 0; e < m; ++e) dst[out.begin[i] + e] = uint32_t(mk[e]);
+            for (uint32_t e = 0; e < m; ++e) dst[offsets[i] + e] = uint32_t(mk[e]);
           }
           pos += own;
         }
@@ -740,14 +722,10 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
 
 void find_neighbors_brute(const float* P, const float* radius, size_t n, const NeighborQuery& q,
                           NeighborList& out) {
-  out.begin.assign(n, 0u);
-  out.end.assign(n, 0u);
-  out.order.resize(n);
-  for (size_t i = 0; i < n; ++i) out.order[i] = uint32_t(i);
+  out.offsets.assign(n + 1, 0u);
   out.indices.clear();
   std::vector<uint64_t> cand;
   for (size_t i = 0; i < n; ++i) {
-    out.begin[i] = uint32_t(out.indices.size());
     cand.clear();
     const float* a = P + 3 * i;
     for (size_t j = 0; j < n; ++j) {
@@ -758,16 +736,25 @@ void find_neighbors_brute(const float* P, const float* radius, size_t n, const N
     }
     const uint32_t m = finish_candidates(cand.data(), uint32_t(cand.size()), q.max_neighbors);
     for (uint32_t e = 0; e < m; ++e) out.indices.push_back(uint32_t(cand[e]));
-    out.end[i] = uint32_t(out.indices.size());
+    out.offsets[i + 1] = uint32_t(out.indices.size());
   }
 }
 
+namespace {
+// Spreads the low 21 bits of v so that two zero bits follow each.
+inline uint64_t spread3(uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | (v << 32)) & 0x1f00000000ffffull;
+  v = (v | (v << 16)) & 0x1f0000ff0000ffull;
+  v = (v | (v << 8)) & 0x100f00f00f00f00full;
+  v = (v | (v << 4)) & 0x10c30c30c30c30c3ull;
+  v = (v | (v << 2)) & 0x1249249249249249ull;
+  return v;
+}
+}  // namespace
 
-// Each point's cell in row-major order, x fastest, then y, then z (21 bits per axis: a grid wider
-// than 2^21 cells clamps its far cells onto the last one, which still gives a permutation), then
-// a stable LSD radix sort. Row-major rather than Morton order because it is the neighbour grid's
-// own key order: grains sorted this way lie nearly in the order their neighbour rows are stored,
-// and the solver visits them in that order (4-5% faster than Morton order on a settled pile).
+// Morton code of each point's cell (21 bits per axis: a grid wider than 2^21 cells clamps its far
+// cells onto the last one, which still gives a permutation), then a stable LSD radix sort.
 std::vector<uint32_t> cell_sort_order(const float* P, size_t n, float cell) {
   std::vector<uint32_t> order(n);
   std::iota(order.begin(), order.end(), 0u);
@@ -794,8 +781,8 @@ std::vector<uint32_t> cell_sort_order(const float* P, size_t n, float cell) {
 #pragma omp parallel for schedule(static)
   for (ptrdiff_t i = 0; i < ptrdiff_t(n); ++i) {
     uint64_t c = 0;
-    for (int a = 2; a >= 0; --a)
-      c = (c << bits) | uint64_t(cell_coord((double(P[3 * i + a]) - lo[a]) * inv, ext[a]));
+    for (int a = 0; a < 3; ++a)
+      c |= spread3(uint64_t(cell_coord((double(P[3 * i + a]) - lo[a]) * inv, ext[a]))) << a;
     code[i] = c;
   }
   // LSD radix sort: stable, so equal codes keep increasing index.

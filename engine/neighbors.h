@@ -11,20 +11,12 @@
 
 namespace grains {
 
-// Rows: the neighbours of i are indices[begin[i] .. end[i]), nearest first (ties broken by
-// lower index). Neighbour lists are symmetric unless max_neighbors truncates. Rows lie in
-// `indices` in no particular order and may leave gaps (the grid search keeps each list where its
-// query wrote it instead of copying it into index order), so indices.size() is the storage, at
-// least the sum of the row lengths; the rows' contents and order depend only on the input.
+// Compressed rows: neighbours of i are indices[offsets[i] .. offsets[i+1]), nearest first
+// (ties broken by lower index). Neighbour lists are symmetric unless max_neighbors truncates.
 struct NeighborList {
-  std::vector<uint32_t> begin;    // (n)
-  std::vector<uint32_t> end;      // (n)
-  std::vector<uint32_t> indices;  // the rows' storage
-  // every grain once, in the order its row lies in storage (roughly): a loop over the rows in
-  // this order reads the storage front to back
-  std::vector<uint32_t> order;  // (n)
-  size_t size() const { return begin.size(); }
-  size_t count(size_t i) const { return end[i] - begin[i]; }
+  std::vector<uint32_t> offsets;  // (n + 1)
+  std::vector<uint32_t> indices;  // (total pairs counted from both ends)
+  size_t count(size_t i) const { return offsets[i + 1] - offsets[i]; }
 };
 
 struct NeighborQuery {
@@ -51,9 +43,8 @@ class NeighborSearch {
 void find_neighbors_brute(const float* P, const float* radius, size_t n, const NeighborQuery& q,
                           NeighborList& out);
 
-// A permutation that orders points by grid cell (cell size `cell`, row-major over the bounding
-// box: x fastest, then y, then z, the neighbour grid's key order), so that neighbouring grains lie
-// close in memory. order[k] = the old index of new slot k.
+// A permutation that orders points by grid cell (cell size `cell`, z-order within the bounding
+// box), so that neighbouring grains lie close in memory. order[k] = the old index of new slot k.
 std::vector<uint32_t> cell_sort_order(const float* P, size_t n, float cell);
 
 }  // namespace grains

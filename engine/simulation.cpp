@@ -318,7 +318,7 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
   q.uniform_radius = uniform;
   search.find(P, r, n, q, nl);
   for (size_t i = 0; i < n; ++i)
-    for (uint32_t e = nl.begin[i]; e < nl.end[i]; ++e) {
+    for (uint32_t e = nl.offsets[i]; e < nl.offsets[i + 1]; ++e) {
       uint32_t j = nl.indices[e];
       if (j <= i) continue;
       float rr = r[i] + r[j];

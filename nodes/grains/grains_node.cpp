@@ -276,8 +276,7 @@ class GrainsNode : public Node {
     }
   }
 
-  // The solver gets its grains in cell order (row-major cells one interaction distance wide, as
-  // the neighbour grid orders them), so
+  // The solver gets its grains in cell order (z-order of cells one interaction distance wide), so
   // that grains near in space are near in memory and the iterations' neighbour reads stay in
   // cache. Only the solver's compact copy is ordered; the store keeps its order. The order
   // depends on the positions alone, so every thread count sees the same one.

@@ -613,8 +613,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   auto find_pairs = [&](bool first) {
     if (!first && pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
     search_.find(p_.data(), search_radius, n, q, neighbors_);
-    g.nbr_begin = neighbors_.begin.data();
-    g.nbr_end = neighbors_.end.data();
+    g.nbr_offsets = neighbors_.offsets.data();
     g.nbr_indices = neighbors_.indices.data();
     if (!pair_friction_pass) return;
     const size_t entries = neighbors_.indices.size();
@@ -631,8 +630,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       pair_normal_.assign(entries, 0.0f);
 #pragma omp parallel for schedule(static) num_threads(threads)
       for (long i = 0; i < ln; ++i)
-        for (uint32_t k = neighbors_.begin[i]; k < neighbors_.end[i]; ++k)
-          for (uint32_t m = prev_neighbors_.begin[i]; m < prev_neighbors_.end[i]; ++m)
+        for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
+          for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
             if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
               pair_normal_[k] = old[m];
               break;
@@ -660,16 +659,13 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     }
     const float* p = p_.data();
     float* next = p_next_.data();
-    // grains in the order their neighbour rows lie in storage, so the rows stream in; each
-    // grain's result does not depend on when it is visited
-    const uint32_t* visit = pairs_on ? neighbors_.order.data() : nullptr;
 #pragma omp parallel num_threads(threads)
     {
       gr_normal_sums mine = acc;  // this thread's row scratch
       if (mine.pair_iteration) mine.pair_iteration += row_length_ * size_t(omp_get_thread_num());
 #pragma omp for schedule(dynamic, 256)
       for (long i = 0; i < ln; ++i) {
-        int ii = visit ? static_cast<int>(visit[i]) : static_cast<int>(i);
+        int ii = static_cast<int>(i);
         gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &mine));
       }
     }
@@ -679,10 +675,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (pair_friction_pass || collider_friction_pass) {
     const float* p = p_.data();
     float* next = p_next_.data();
-    const uint32_t* visit = pairs_on ? neighbors_.order.data() : nullptr;  // as the loop above
 #pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
-      int ii = visit ? static_cast<int>(visit[i]) : static_cast<int>(i);
+      int ii = static_cast<int>(i);
       gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
     }
     p_.swap(p_next_);
@@ -744,7 +739,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     double sum = 0;
     for (size_t i = 0; i < n; ++i) {
       Vec3 pi = load3(d.P, i);
-      for (uint32_t k = neighbors_.begin[i]; k < neighbors_.end[i]; ++k) {
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
         uint32_t j = neighbors_.indices[k];
         if (j <= i) continue;
         float rsum = radius_[i] + radius_[j];

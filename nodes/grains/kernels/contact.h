@@ -66,7 +66,7 @@ GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int 
                               float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum) {
   const float px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
   const float ri = g->radius[i], wi = g->inv_mass[i];
-  const gr_uint b = g->nbr_begin[i], e = g->nbr_end[i];
+  const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
   const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
   float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
   gr_uint k;
@@ -122,7 +122,7 @@ GR_HOT int gr_gather_contacts_uniform(const gr_grains* g, const GR_GLOBAL float*
   const float rsum = g->uniform_radius + g->uniform_radius;
   const float rsum2 = rsum * rsum;
   const float half_repulse = 0.5f * repulse;
-  const gr_uint b = g->nbr_begin[i], e = g->nbr_end[i];
+  const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
   const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
   float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
   gr_uint k;
@@ -187,7 +187,7 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
   if (!(clump > 0.0f) && !fric && !skip_constrained && prm->mass_shock != 2) {
     if (!(repulse > 0.0f)) {
       if (overlap_out)
-        for (k = g->nbr_begin[i]; k < g->nbr_end[i]; ++k) overlap_out[k - g->nbr_begin[i]] = 0.0f;
+        for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k - g->nbr_offsets[i]] = 0.0f;
       return 0;
     }
     if (g->uniform_radius > 0.0f && g->uniform_inv_mass > 0.0f)
@@ -195,7 +195,7 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
     return gr_gather_contacts(g, p, i, repulse, overlap_out, sum);
   }
   gr_float3 acc = gr_make3(0.0f, 0.0f, 0.0f);
-  const gr_uint row_begin = g->nbr_begin[i], row_end = g->nbr_end[i];
+  const gr_uint row_begin = g->nbr_offsets[i], row_end = g->nbr_offsets[i + 1];
   for (k = row_begin; k < row_end; ++k) {
     int j = (int)g->nbr_indices[k];
     gr_float3 xij = gr_sub(pi, gr_load3(p, j));
@@ -244,7 +244,7 @@ GR_INLINE int gr_gather_pair_friction(const gr_grains* g, const gr_params* prm,
   int count = 0;
   gr_float3 pi = gr_load3(p, i);
   gr_uint k;
-  for (k = g->nbr_begin[i]; k < g->nbr_end[i]; ++k) {
+  for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
     int j = (int)g->nbr_indices[k];
     float d = normal[k];
     if (j == i || !(d > 0.0f)) continue;

@@ -58,7 +58,7 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0, ccount = 0;
   float pen[GR_MAX_PLANES];
-  if (g->nbr_begin) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
+  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
   if (g->plane_offsets) ccount = gr_gather_collider(g, prm, p, i, with_friction, pen, &csum);
   count += ccount;
   sum = gr_add(sum, csum);
@@ -69,10 +69,10 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
                        gr_average_factor(count, prm->over_relaxation, prm->disable_averaging), pen);
   if (acc->pair || acc->collider) {
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
-    if (acc->pair && g->nbr_begin) {
+    if (acc->pair && g->nbr_offsets) {
       gr_uint k;
-      const gr_uint b = g->nbr_begin[i];
-      for (k = b; k < g->nbr_end[i]; ++k) acc->pair[k] += acc->pair_iteration[k - b] * share;
+      const gr_uint b = g->nbr_offsets[i];
+      for (k = b; k < g->nbr_offsets[i + 1]; ++k) acc->pair[k] += acc->pair_iteration[k - b] * share;
     }
     if (acc->collider && g->plane_offsets) {
       int k;
@@ -88,7 +88,7 @@ GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
   gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0, ccount = 0;
-  if (acc->pair && g->nbr_begin) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
+  if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
   if (acc->collider && g->plane_offsets)
     ccount = gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &csum);
   count += ccount;

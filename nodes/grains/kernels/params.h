@@ -62,10 +62,7 @@ typedef struct {
   const GR_GLOBAL float* repulsionstiffness;  /* (n) optional */
   const GR_GLOBAL float* attractionweight;    /* (n) optional */
   const GR_GLOBAL float* attractionstiffness; /* (n) optional */
-  /* neighbour rows: i's candidates are nbr_indices[nbr_begin[i] .. nbr_end[i]), nearest
-   * first; rows lie anywhere in nbr_indices. Both null: no pairs. */
-  const GR_GLOBAL gr_uint* nbr_begin; /* (n) */
-  const GR_GLOBAL gr_uint* nbr_end;   /* (n) */
+  const GR_GLOBAL gr_uint* nbr_offsets;       /* (n + 1) neighbour rows, or null: no pairs */
   const GR_GLOBAL gr_uint* nbr_indices;
   /* collider contact planes: row i lists grain i's planes (at most GR_MAX_PLANES, nearest
    * first), entries [plane_offsets[i], plane_offsets[i + 1]) of `plane`, 9 floats each: surface

@@ -60,12 +60,18 @@ GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
  * i itself contributes 0. Lanes past the end repeat the row's last entry, so the block never
  * reads outside the row. Each lane keeps its own sums, added in lane order at the end: the
  * result depends on the row, not on the thread count. Coincident grains separate along -+y by
- * index, as gr_pair_normal. Shares w_i / (w_i + w_j) with global mass-shock come from inv_mass. */
+ * index, as gr_pair_normal. Shares w_i / (w_i + w_j) with global mass-shock come from inv_mass.
+ * `uniform` (a constant at each call, so each call site compiles its own loop): every grain has
+ * g->uniform_radius and g->uniform_inv_mass, so the summed radii are 2r and the share
+ * w / (w + w) is exactly 1/2, and a candidate costs only its position; the arithmetic is the
+ * same, so the result is bit-identical to the general loop's. */
 #define GR_LANES 8
-GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int i,
-                              float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum) {
+GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p, int i,
+                                    float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum,
+                                    const int uniform) {
   const float px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
-  const float ri = g->radius[i], wi = g->inv_mass[i];
+  const float ri = uniform ? g->uniform_radius : g->radius[i];
+  const float wi = uniform ? g->uniform_inv_mass : g->inv_mass[i];
   const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
   const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
   float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
@@ -79,66 +85,14 @@ GR_HOT int gr_gather_contacts(const gr_grains* g, const GR_GLOBAL float* p, int 
       const int j = (int)nbr[kk];
       const float dx = px - p[3 * j], dy = py - p[3 * j + 1], dz = pz - p[3 * j + 2];
       const float d2 = dx * dx + dy * dy + dz * dz;
-      const float rsum = ri + g->radius[j];
+      const float rsum = ri + (uniform ? ri : g->radius[j]);
       const float dist = gr_sqrt(d2);
-      const float wsum = wi + g->inv_mass[j];
+      const float wsum = wi + (uniform ? wi : g->inv_mass[j]);
       const int touching = (d2 < rsum * rsum) & (j != i) & (wsum > 0.0f);
       const float d = touching ? rsum - dist : 0.0f;
       /* correction length share * d * repulse along n = x_ij / dist */
-      const float f = (touching & live) ? wi / wsum * d * repulse : 0.0f;
-      const float along = dist > 0.0f ? f / dist : 0.0f;
-      const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
-      lx[l] += along * dx;
-      ly[l] += along * dy + apart_y;
-      lz[l] += along * dz;
-      lc[l] += f != 0.0f ? 1.0f : 0.0f;
-      ld[l] = d;
-    }
-    if (overlap_out)
-      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
-  }
-  {
-    float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;
-    for (l = 0; l < GR_LANES; ++l) {
-      sx += lx[l];
-      sy += ly[l];
-      sz += lz[l];
-      count += lc[l];
-    }
-    sum->x += sx;
-    sum->y += sy;
-    sum->z += sz;
-    return (int)count;
-  }
-}
-
-/* gr_gather_contacts for equal grains (g->uniform_radius and g->uniform_inv_mass set): the
- * summed radii are 2r and the share w / (w + w) = 1/2 for every pair, so a candidate costs only
- * its position. The same arithmetic as the general loop with those values (the share is exactly
- * 0.5 there too), so both give bit-identical results. */
-GR_HOT int gr_gather_contacts_uniform(const gr_grains* g, const GR_GLOBAL float* p, int i,
-                                      float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum) {
-  const float px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
-  const float rsum = g->uniform_radius + g->uniform_radius;
-  const float rsum2 = rsum * rsum;
-  const float half_repulse = 0.5f * repulse;
-  const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
-  const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
-  float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
-  gr_uint k;
-  int l;
-  for (l = 0; l < GR_LANES; ++l) lx[l] = ly[l] = lz[l] = lc[l] = 0.0f;
-  for (k = b; k < e; k += GR_LANES) {
-    for (l = 0; l < GR_LANES; ++l) {
-      const int live = k + (gr_uint)l < e;
-      const gr_uint kk = live ? k + (gr_uint)l : e - 1;
-      const int j = (int)nbr[kk];
-      const float dx = px - p[3 * j], dy = py - p[3 * j + 1], dz = pz - p[3 * j + 2];
-      const float d2 = dx * dx + dy * dy + dz * dz;
-      const float dist = gr_sqrt(d2);
-      const int touching = (d2 < rsum2) & (j != i);
-      const float d = touching ? rsum - dist : 0.0f;
-      const float f = (touching & live) ? half_repulse * d : 0.0f;
+      const float share = uniform ? 0.5f : wi / wsum;
+      const float f = (touching & live) ? share * d * repulse : 0.0f;
       const float along = dist > 0.0f ? f / dist : 0.0f;
       const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
       lx[l] += along * dx;
@@ -191,8 +145,8 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
       return 0;
     }
     if (g->uniform_radius > 0.0f && g->uniform_inv_mass > 0.0f)
-      return gr_gather_contacts_uniform(g, p, i, repulse, overlap_out, sum);
-    return gr_gather_contacts(g, p, i, repulse, overlap_out, sum);
+      return gr_gather_contacts_lanes(g, p, i, repulse, overlap_out, sum, 1);
+    return gr_gather_contacts_lanes(g, p, i, repulse, overlap_out, sum, 0);
   }
   gr_float3 acc = gr_make3(0.0f, 0.0f, 0.0f);
   const gr_uint row_begin = g->nbr_offsets[i], row_end = g->nbr_offsets[i + 1];

@@ -140,10 +140,12 @@ int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
 
 // The origin a substep computes in. Float positions far from the world origin lose small
 // corrections (at 100 m one float step is 7.6e-6 m, so a hanging chain's per-iteration pulls
-// vanish and it stretches 4x more than at the origin). Along an axis where the grains' box lies
+// vanish and it stretched 3.3x the Jacobi estimate). Along an axis where the grains' box lies
 // farther from 0 than twice its own size S (a power of two at least the box's largest extent),
-// the substep works relative to the box centre rounded to a multiple of S: few significant bits,
-// so most coordinates shift exactly. Near the origin the shift is 0 and nothing changes.
+// the substep works relative to the box centre rounded to a multiple of S. Every coordinate x
+// then lies within S of the origin o while both exceed 1.5 S, so x / o is within [0.6, 1.67]:
+// x - o is exact (Sterbenz), and so is adding o back, so a grain that does not move keeps its
+// world position bit for bit. Near the origin the shift is 0 and nothing changes.
 Vec3 local_origin(const float* P, size_t n, int threads) {
   const float inf = std::numeric_limits<float>::infinity();
   float lx = inf, ly = inf, lz = inf, hx = -inf, hy = -inf, hz = -inf;
@@ -642,7 +644,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (pairs_on) find_pairs(true);
   if (colliders_on) {
-    find_planes(P0_.data(), p_.data(), origin, colliders, collider_count, s.neighbor_query_scale, threads);
+    find_planes(P0_.data(), p_.data(), origin, colliders, collider_count,
+                s.neighbor_query_scale, threads);
     g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
   }
@@ -653,7 +656,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations)
     {
-      find_planes(P0_.data(), p_.data(), origin, colliders, collider_count, s.neighbor_query_scale, threads);
+      find_planes(P0_.data(), p_.data(), origin, colliders, collider_count,
+                  s.neighbor_query_scale, threads);
       g.plane_offsets = plane_offsets_.data();
       g.plane = plane_.data();
     }
@@ -693,10 +697,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       int ii = static_cast<int>(i);
       gr_float3 Pk, vk;
       gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
-      // back to world space; a grain that stays (drift) keeps its world position exactly
-      const Vec3 a = load3(d.P, i), local = to_vec(Pk);
-      const bool stays = local.x == P0_[3 * i] && local.y == P0_[3 * i + 1] && local.z == P0_[3 * i + 2];
-      Vec3 b = stays ? a : local + origin, v = to_vec(vk);
+      // back to world space (exact for a grain that stays: see local_origin)
+      const Vec3 a = load3(d.P, i);
+      Vec3 b = to_vec(Pk) + origin, v = to_vec(vk);
       const Vec3 v_loop = v;
       int32_t hit = -1;
       Vec3 hit_n;

@@ -30,8 +30,9 @@
 // at the end); a final pass writes every list at its place in original-index order.
 //
 // Buffers. keys_: cell keys for the counting sort, then the store the query pass's chunks put
-// their lists in. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays. cell_start_:
-// cell starts, per-chunk list positions, per-slot counts, handed-over group starts and groups.
+// their lists in. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays.
+// cell_start_: cell starts, per-chunk list positions, per-slot counts, handed-over group starts
+// and groups.
 // Per-thread scratch lives in a thread_local struct (the header has no per-thread member). All
 // keep their capacity, so nothing is allocated once sizes settle.
 #include "engine/neighbors.h"

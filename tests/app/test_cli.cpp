@@ -97,11 +97,12 @@ TEST_CASE("a graph's frames are bit-identical for 1 and 2 threads", "[cli][deter
     INFO(name);
     CHECK(read_text(dir + "/t1" + name) == read_text(dir + "/t2" + name));
   }
-  // stats.csv too, but for its wall_ms column: equal grains (column_collapse.json, 2,640 grains in
-  // three blocks of 1,024 by frame 4) take the parallel
-  // block-summed penetration scan, breaking_wall's two sizes the general search
-  REQUIRE(run_grains("run " + source_dir() + "/graphs/column_collapse.json --frames 4 --quiet --threads 1 --out " + dir + "/d1", dir + "/log") == 0);
-  REQUIRE(run_grains("run " + source_dir() + "/graphs/column_collapse.json --frames 4 --quiet --threads 2 --out " + dir + "/d2", dir + "/log") == 0);
+  // stats.csv too, but for its wall_ms column: equal grains (column_collapse.json, 2,640 grains
+  // in three blocks of 1,024 by frame 4) take the parallel block-summed penetration scan,
+  // breaking_wall's two sizes the general search
+  const std::string collapse = source_dir() + "/graphs/column_collapse.json --frames 4 --quiet";
+  REQUIRE(run_grains("run " + collapse + " --threads 1 --out " + dir + "/d1", dir + "/log") == 0);
+  REQUIRE(run_grains("run " + collapse + " --threads 2 --out " + dir + "/d2", dir + "/log") == 0);
   auto without_wall = [](const std::string& csv) {
     std::string out;
     for (const std::string& line : split(csv, '\n')) {
@@ -115,7 +116,8 @@ TEST_CASE("a graph's frames are bit-identical for 1 and 2 threads", "[cli][deter
   };
   for (const char* run : {"/t", "/d"}) {
     INFO(run);
-    const std::string a = read_text(dir + run + "1/stats.csv"), b = read_text(dir + run + "2/stats.csv");
+    const std::string a = read_text(dir + run + "1/stats.csv");
+    const std::string b = read_text(dir + run + "2/stats.csv");
     REQUIRE(a.size() > 100);
     CHECK(without_wall(a) == without_wall(b));
   }

@@ -75,22 +75,30 @@ inline uint64_t pair_key(double d2, uint32_t j) {
 }
 
 // Keep at most K (K <= 0: all) smallest keys, sorted. Returns how many are kept.
+// Lists of up to kRankMax keys are ranked instead: a key's place is the number of smaller keys,
+// counted over all pairs in a branch-free loop that the compiler vectorises. Keys are unique (the
+// index is part of them), so the places are a permutation and the result is the sorted order a
+// comparison sort gives. At these sizes the m^2 compares cost less than the unpredictable
+// branches of nth_element and insertion sort: a crushed 100k pile's lists hold 64 to 112
+// candidates before the cut to max_neighbors, and ranking took its 8 substeps from 3.91-3.94 s
+// to 3.46-3.78 s of CPU.
+constexpr uint32_t kRankMax = 128;
 inline uint32_t finish_candidates(uint64_t* c, uint32_t m, int K) {
-  if (K > 0 && m > uint32_t(K)) {
-    std::nth_element(c, c + K, c + m);
-    m = uint32_t(K);
-  }
-  if (m <= 40) {  // typical lists: insertion sort beats introsort's partitioning
-    for (uint32_t a = 1; a < m; ++a) {
-      const uint64_t v = c[a];
-      uint32_t b = a;
-      for (; b > 0 && c[b - 1] > v; --b) c[b] = c[b - 1];
-      c[b] = v;
+  const uint32_t keep = K > 0 ? std::min(m, uint32_t(K)) : m;
+  if (m <= kRankMax) {
+    uint64_t v[kRankMax], rank[kRankMax];
+    for (uint32_t a = 0; a < m; ++a) v[a] = c[a], rank[a] = 0;
+    for (uint32_t b = 0; b < m; ++b) {
+      const uint64_t vb = v[b];
+      for (uint32_t a = 0; a < m; ++a) rank[a] += vb < v[a];
     }
-  } else {
-    std::sort(c, c + m);
+    for (uint32_t a = 0; a < m; ++a)
+      if (rank[a] < keep) c[rank[a]] = v[a];
+    return keep;
   }
-  return m;
+  if (keep < m) std::nth_element(c, c + keep, c + m);
+  std::sort(c, c + keep);
+  return keep;
 }
 
 // Cell coordinate of a (double) grid-space value: floor, clamped to [0, ext - 1]; NaN -> 0.

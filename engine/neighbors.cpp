@@ -29,10 +29,10 @@
 // a counting sort whose order inside a group does not matter (every list is sorted by unique keys
 // at the end); a final pass writes every list at its place in original-index order.
 //
-// Buffers. keys_: cell keys for the counting sort, then the store the query pass's chunks put
-// their lists in. order_: sorted slot -> original index. scratch_: sorted x, y, z, r arrays.
-// cell_start_: cell starts, per-chunk list positions, per-slot counts, handed-over group starts
-// and groups.
+// Buffers. keys_ (or the caller's store): cell keys for the counting sort, then the store the
+// query pass's chunks put their lists in. order_: sorted slot -> original index. scratch_:
+// sorted x, y, z, r arrays. cell_start_: cell starts, per-chunk list positions, per-slot
+// counts, handed-over group starts and groups.
 // Per-thread scratch lives in a thread_local struct (the header has no per-thread member). All
 // keep their capacity, so nothing is allocated once sizes settle.
 #include "engine/neighbors.h"
@@ -432,7 +432,7 @@ struct Searcher {
 }  // namespace
 
 void NeighborSearch::find(const float* P, const float* radius, size_t n, const NeighborQuery& q,
-                          NeighborList& out) {
+                          NeighborList& out, std::vector<uint32_t>* store) {
   out.offsets.resize(n + 1);
   out.offsets[0] = 0;
   if (n == 0) {
@@ -443,6 +443,9 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
   T = std::clamp(T, 1, kMaxThreads);
   T = int(std::min<size_t>(size_t(T), std::max<size_t>(1, n / 64)));
 
+  // the cell keys, then the lists' store: the caller's buffer (all of its capacity) or ours
+  std::vector<uint32_t>& buf = store ? *store : keys_;
+  if (buf.size() < buf.capacity()) buf.resize(buf.capacity());
   const bool want_levels = !q.uniform_radius;
   Stats st;
   gather_stats(P, radius, n, T, want_levels, st);
@@ -508,7 +511,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
 
   // Keys, then a stable counting sort into cells (level-major, so every level is one slot range
   // and larger levels come later).
-  if (keys_.size() < n) keys_.resize(n);
+  if (buf.size() < n) buf.resize(n);
   if (order_.size() < n) order_.resize(n);
   if (scratch_.size() < 4 * n) scratch_.resize(4 * n);
   const size_t chunk = std::max<size_t>(64, (n + 16 * size_t(T) - 1) / (16 * size_t(T)));
@@ -518,7 +521,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
   const size_t start_size = total_keys + 2, at_chunks = start_size, at_found = at_chunks + nchunks,
                at_groups = at_found + n, at_handed = at_groups + n + 2;
   if (cell_start_.size() < at_handed) cell_start_.resize(at_handed);
-  uint32_t* keys = keys_.data();
+  uint32_t* keys = buf.data();
 #pragma omp parallel for schedule(static) num_threads(T)
   for (ptrdiff_t i = 0; i < ptrdiff_t(n); ++i) {
     const Grid& g = multi ? levels[bin_level[radius_bin(radius[i])]] : levels[0];
@@ -561,9 +564,9 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
     // the lists' store: its contents (the cell keys) are spent, so a growth frees first
     const size_t per = K > 0 ? std::min<size_t>(size_t(K), 24) : 24;
     const size_t want = n * per + 1024;
-    if (keys_.size() < want) {
-      std::vector<uint32_t>().swap(keys_);
-      keys_.resize(want);
+    if (buf.size() < want) {
+      std::vector<uint32_t>().swap(buf);
+      buf.resize(want);
     }
   }
   size_t top = 0;  // the store's next free entry
@@ -577,11 +580,11 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
     uint32_t* found = cell_start_.data() + at_found;
     // 1. Queries. Consecutive slots in one cell form a run sharing one gather (the candidates
     // around the run's bounding box). A chunk's kept lists collect in the thread's scratch and
-    // then take the next free range of the shared store keys_ (where is timing-dependent, but
+    // then take the next free range of the shared store (where is timing-dependent, but
     // only step 4 reads it, through chunk_pos); past the end the chunks keep counting, and the
     // pass is redone with room.
     for (;;) {
-      const size_t cap = keys_.size();
+      const size_t cap = buf.size();
       ts.nhanded = 0;
 #pragma omp for schedule(dynamic, 1)
       for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {
@@ -631,14 +634,14 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
         }
         chunk_pos[c] = uint32_t(pos);
         if (pos + ts.list.size() <= cap)  // past cap: keep counting so the retry knows the size
-          std::memcpy(keys_.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
+          std::memcpy(buf.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
       }
 #pragma omp single
       {
         redo = top > cap;
         if (redo) {
-          std::vector<uint32_t>().swap(keys_);  // free first: the old lists are redone anyway
-          keys_.resize(top + top / 16 + 4096);
+          std::vector<uint32_t>().swap(buf);  // free first: the old lists are redone anyway
+          buf.resize(top + top / 16 + 4096);
         }
         top = 0;
       }
@@ -696,7 +699,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
       const uint32_t *cpos = base + at_chunks, *fnd = base + at_found, *gstart = base + at_groups,
                      *groups = base + at_handed;
       uint32_t* dst = out.indices.data();
-      const uint32_t* src = keys_.data();
+      const uint32_t* src = buf.data();
       // dynamic: the merges gather in the slots of the larger levels, at the end
 #pragma omp for schedule(dynamic, 1)
       for (ptrdiff_t c = 0; c < ptrdiff_t(nchunks); ++c) {

@@ -30,8 +30,11 @@ struct NeighborQuery {
 // repeated calls allocate nothing once sizes settle.
 class NeighborSearch {
  public:
+  // store: a buffer the lists are kept in until they are copied into `out` (nullptr: the
+  // search's own); for a caller with a buffer of about 4 bytes per neighbour entry that is idle
+  // during the search. Its contents are unspecified afterwards; its capacity is kept.
   void find(const float* P, const float* radius, size_t n, const NeighborQuery& q,
-            NeighborList& out);
+            NeighborList& out, std::vector<uint32_t>* store = nullptr);
 
  private:
   struct Level;

@@ -614,7 +614,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   q.threads = threads;
   auto find_pairs = [&](bool first) {
     if (!first && pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
-    search_.find(p_.data(), search_radius, n, q, neighbors_);
+    // The friction pass's per-entry sums and the search's list store are about the same size
+    // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
+    // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
+    // carry the sums over and use the search's own store.
+    search_.find(p_.data(), search_radius, n, q, neighbors_,
+                 first && pair_friction_pass ? &pair_normal_ : nullptr);
     g.nbr_offsets = neighbors_.offsets.data();
     g.nbr_indices = neighbors_.indices.data();
     if (!pair_friction_pass) return;
@@ -624,12 +629,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     row_length_ = std::max<size_t>(longest, 1);
     pair_normal_it_.resize(row_length_ * size_t(threads));
     if (first) {
-      pair_normal_.assign(entries, 0.0f);
+      pair_normal_.assign(entries, 0u);  // the bits of 0.0f
     } else {
       // carry each pair's accumulated overlap over to its slot in the rebuilt rows
-      std::vector<float> old;
+      std::vector<uint32_t> old;
       old.swap(pair_normal_);
-      pair_normal_.assign(entries, 0.0f);
+      pair_normal_.assign(entries, 0u);
 #pragma omp parallel for schedule(static) num_threads(threads)
       for (long i = 0; i < ln; ++i)
         for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)

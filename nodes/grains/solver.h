@@ -155,7 +155,7 @@ class GrainsSolver {
                                     // substep's origin (local_origin in solver.cpp)
   std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0
   // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
-  std::vector<float> pair_normal_;     // (neighbour entries) m
+  std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
   std::vector<float> pair_normal_it_;  // (threads x row_length_) m: this iteration's overlaps
   size_t row_length_ = 1;              // the longest neighbour row
   std::vector<float> collider_normal_;               // (n) m

@@ -186,21 +186,21 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
 }
 
 /* The friction pass after the constraint loop (accurate_friction off): friction only, once,
- * bounded by each contact's accumulated overlap `normal` (per neighbour entry): the sum over the
- * iterations of the overlap each saw, divided like the corrections by the grain's constraint
- * count. It is the position-level normal impulse the contact delivered (Coulomb: friction <= mu
- * x normal impulse) and, like the per-iteration bound of accurate friction, grows when contacts
- * are soft and with iterations (help page notes). The final overlap alone would vanish whenever
- * a contact converged. */
+ * bounded by each contact's accumulated overlap `normal` (per neighbour entry, as float bits):
+ * the sum over the iterations of the overlap each saw, divided like the corrections by the
+ * grain's constraint count. It is the position-level normal impulse the contact delivered
+ * (Coulomb: friction <= mu x normal impulse) and, like the per-iteration bound of accurate
+ * friction, grows when contacts are soft and with iterations (help page notes). The final
+ * overlap alone would vanish whenever a contact converged. */
 GR_INLINE int gr_gather_pair_friction(const gr_grains* g, const gr_params* prm,
-                                      const GR_GLOBAL float* p, const GR_GLOBAL float* normal,
+                                      const GR_GLOBAL float* p, const GR_GLOBAL gr_uint* normal,
                                       int i, gr_float3* sum) {
   int count = 0;
   gr_float3 pi = gr_load3(p, i);
   gr_uint k;
   for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
     int j = (int)g->nbr_indices[k];
-    float d = normal[k];
+    float d = gr_as_float(normal[k]);
     if (j == i || !(d > 0.0f)) continue;
     gr_float3 xij = gr_sub(pi, gr_load3(p, j));
     gr_float3 n = gr_pair_normal(xij, gr_length(xij), i, j);

@@ -14,7 +14,9 @@
 typedef struct {
   GR_GLOBAL float* pair_iteration; /* (row length) overlap this iteration: the caller's
                                     * scratch for the grain being iterated (per thread) */
-  GR_GLOBAL float* pair;           /* (neighbour entries) sum over iterations of overlap / n_i */
+  /* (neighbour entries) sum over iterations of overlap / n_i, as float bits: unsigned storage,
+   * so that the solver can lend the same memory to the neighbour search between substeps */
+  GR_GLOBAL gr_uint* pair;
   GR_GLOBAL float* collider;       /* (n x GR_MAX_PLANES) the same for the collider planes */
   /* (n x GR_MAX_PLANES x 3) m: each collider plane's share of i's applied corrections, summed
    * over the iterations (impact data and collision feedback), or null. The collider part of a
@@ -72,7 +74,8 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
     if (acc->pair && g->nbr_offsets) {
       gr_uint k;
       const gr_uint b = g->nbr_offsets[i];
-      for (k = b; k < g->nbr_offsets[i + 1]; ++k) acc->pair[k] += acc->pair_iteration[k - b] * share;
+      for (k = b; k < g->nbr_offsets[i + 1]; ++k)
+        acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
     }
     if (acc->collider && g->plane_offsets) {
       int k;

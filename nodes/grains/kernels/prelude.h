@@ -27,6 +27,8 @@ GR_INLINE gr_float3 gr_scale(gr_float3 a, float s) { return a * s; }
 GR_INLINE float gr_dot(gr_float3 a, gr_float3 b) { return dot(a, b); }
 GR_INLINE gr_float3 gr_load3(const __global float* a, int i) { return vload3(i, a); }
 GR_INLINE void gr_store3(__global float* a, int i, gr_float3 v) { vstore3(v, i, a); }
+#define gr_as_float(u) as_float(u)
+#define gr_as_uint(f) as_uint(f)
 
 #else /* C / C++ */
 
@@ -69,6 +71,9 @@ GR_INLINE void gr_store3(float* a, int i, gr_float3 v) {
   a[3 * i + 1] = v.y;
   a[3 * i + 2] = v.z;
 }
+/* a float kept as its bits in unsigned storage (OpenCL's as_float / as_uint) */
+GR_INLINE float gr_as_float(gr_uint u) { return __builtin_bit_cast(float, u); }
+GR_INLINE gr_uint gr_as_uint(float f) { return __builtin_bit_cast(gr_uint, f); }
 
 #endif
 

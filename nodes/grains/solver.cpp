@@ -89,44 +89,74 @@ gr_params make_params(const GrainsSettings& s) {
 
 inline Vec3 to_vec(gr_float3 a) { return {a.x, a.y, a.z}; }
 
-// Removes the velocity component into a collider, relative to the collider's own motion.
-void remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocity) {
+// Removes the velocity component into a collider, relative to the collider's own motion;
+// returns the normal speed removed (>= 0).
+float remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocity) {
   float vn = dot(v - collider_velocity, n);
-  if (vn < 0) v -= n * vn;
+  if (!(vn < 0)) return 0.0f;
+  v -= n * vn;
+  return -vn;
 }
+
+// Collider friction of the final pass's grain-collider terms, at velocity level: the kernels'
+// law (eqs. 23-25, kernels/collider.h) with slip and overlap per substep both divided by dt, so
+// the normal speed the pass removed bounds the tangential speed relative to the collider:
+// |v_t| < static_threshold * mu * removed stops it, else it loses
+// min(1, scale_kinetic * mu * removed / |v_t|) of it. mu = friction_with_colliders x friction.
+struct SweptFriction {
+  float mu = 0, static_threshold = 1, scale_kinetic = 0.5f;
+  void apply(Vec3& v, const Vec3& n, const Vec3& collider_velocity, float removed) const {
+    if (!(mu > 0) || !(removed > 0)) return;
+    const Vec3 rel = v - collider_velocity;
+    v += to_vec(gr_friction(gr_make3(rel.x, rel.y, rel.z), gr_make3(n.x, n.y, n.z),
+                            mu * removed, static_threshold, scale_kinetic));
+  }
+};
 
 // The final collision pass for one grain moving from a (start, world) to b (end, world) with
 // velocity v, radius r: against each collider in turn,
-//  - an end point closer than r to the surface is pushed out to distance r along the normal;
+//  - an end point closer than r to the surface is pushed out to distance r along the normal
+//    (unless it came through the collider, below);
 //  - otherwise a path that came within r/2 of the surface somewhere between a and b (the sphere
 //    trace of ColliderState::sweep, relative to the collider's motion) tunnelled through a thin
 //    or moving collider: the grain is put where the trace first reached distance r, carried by
 //    the collider to its end pose, and pushed out to r. The r/2 test keeps grains sliding along
 //    a surface at distance ~r from counting as hits.
-// Either way the velocity component into the collider is removed. *hit receives the index of the
-// last collider that acted (unchanged when none did) and *hit_n its normal.
+// Either way the velocity component into the collider is removed. A tunnelling grain's contact
+// was never seen by the iterations, so its collider friction was not applied either: the pass
+// applies it (`friction`) to the hit. An end point within r was in the iterations' contact
+// planes, which already had its friction. *hit receives the index of the last collider that
+// acted (unchanged when none did) and *hit_n its normal.
 void final_collision(const ColliderState* colliders, size_t collider_count, const Vec3& a,
-                     Vec3& b, Vec3& v, float r, int32_t* hit, Vec3* hit_n) {
+                     Vec3& b, Vec3& v, float r, const SweptFriction& friction, int32_t* hit,
+                     Vec3* hit_n) {
   for (size_t c = 0; c < collider_count; ++c) {
     const ColliderState& col = colliders[c];
     Vec3 n;
     float e = col.distance(b, &n);
-    if (e < r) {
+    // An end point within r is pushed out, unless the grain moved along that normal and its
+    // path crossed the collider: then it is on the far side of a thin one (the iterations
+    // pushed it out the back) and is handled as tunnelled below. Moving along the normal, a
+    // path that does not cross never comes within r/2 of the surface unless it started there.
+    const bool near = e < r;
+    float t_half = 2.0f;  // > 1: no hit
+    if (!near || dot(b - a, n) > 0) t_half = col.sweep(a, b, 0.5f * r);
+    if (!(t_half > 0.0f && t_half <= 1.0f)) {  // 0: started deep (and left), > 1: no hit
+      if (!near) continue;
       b += n * (r - e);
       remove_inward_velocity(v, n, col.velocity_at(b));
       *hit = static_cast<int32_t>(c);
       *hit_n = n;
       continue;
     }
-    float t_half = col.sweep(a, b, 0.5f * r);
-    if (!(t_half > 0.0f && t_half <= 1.0f)) continue;  // 0: started deep (and left), > 1: no hit
     float t = std::min(col.sweep(a, b, r), t_half);
     Vec3 la = col.prev_pose.inverse(a), lb = col.pose.inverse(b);
     Vec3 h = col.pose.apply(la + (lb - la) * t);
     float eh = col.distance(h, &n);
     if (eh < r) h += n * (r - eh);
     b = h;
-    remove_inward_velocity(v, n, col.velocity_at(b));
+    const Vec3 vc = col.velocity_at(b);
+    friction.apply(v, n, vc, remove_inward_velocity(v, n, vc));
     *hit = static_cast<int32_t>(c);
     *hit_n = n;
   }
@@ -708,7 +738,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       const Vec3 v_loop = v;
       int32_t hit = -1;
       Vec3 hit_n;
-      if (final_test) final_collision(colliders, collider_count, a, b, v, radius_[i], &hit, &hit_n);
+      if (final_test) {
+        SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
+                         s.static_threshold, s.scale_kinetic};
+        final_collision(colliders, collider_count, a, b, v, radius_[i], fr, &hit, &hit_n);
+      }
       store3(d.P, i, b);
       store3(d.v, i, v);
       if (!impacts) continue;

@@ -155,6 +155,10 @@ const std::vector<BenchFeature>& bench_features() {
       {"enable_collision_feedback", {"grains.enable_collision_feedback=1"}},
       {"over_relaxation_1.5", {"grains.over_relaxation=1.5"}},
       {"max_neighbors_16", {"grains.max_neighbors=16"}},
+      {"chebyshev_0.95", {"grains.chebyshev_rho=0.95"}},
+      {"chebyshev_0.95_mass_shock_8",
+       {"grains.chebyshev_rho=0.95", "grains.enable_mass_shock_scaling=1",
+        "grains.shock_scaling_power=8"}},
   };
   return features;
 }

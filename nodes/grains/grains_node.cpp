@@ -166,6 +166,7 @@ class GrainsNode : public Node {
     st.drift_threshold = static_cast<float>(p.f("drift_threshold"));
     st.velocity_blend = static_cast<float>(p.f("velocity_blend"));
     st.over_relaxation = static_cast<float>(p.f("over_relaxation"));
+    st.chebyshev_rho = static_cast<float>(p.f("chebyshev_rho"));
     st.update_collisions_during_iterations = p.b("update_collisions_during_iterations");
     st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
     st.final_collision_test = p.b("final_collision_test");
@@ -384,6 +385,10 @@ void register_grains_node() {
       ParamDecl::Float("drift_threshold", 0, "grains slower than this stay where they were").at_least(0).unit("m/s"),
       ParamDecl::Float("velocity_blend", 0, "blend of the new velocity with the predicted one").range(0, 1),
       ParamDecl::Float("over_relaxation", 1, "scale of the averaged corrections; above 1 converges faster").range(0, 2),
+      ParamDecl::Float("chebyshev_rho", 0,
+                       "Chebyshev acceleration of the iterations (not in POP Grains): the estimated spectral radius of the "
+                       "Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
+          .range(0, 0.95),
       ParamDecl::Toggle("update_collisions_during_iterations", false, "re-find collider planes every iteration"),
       ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),
       ParamDecl::Toggle("final_collision_test", true, "a swept collision pass after the loop: no leaks through thin or moving colliders"),

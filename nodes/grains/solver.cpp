@@ -4,7 +4,8 @@
 //   1. predict p = P + dt (v + dt f/m)                                  (kernels/velocity.h)
 //   2. neighbour candidates from p (neighbor_query_scale, max_neighbors) and one collider plane
 //      per grain (the nearest collider within range), once, or every iteration when asked
-//   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h);
+//   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h),
+//      Chebyshev-extrapolated when chebyshev_rho > 0;
 //      without accurate_friction one friction-only pass follows the loop
 //      (pins gather with the rest). Rigid shape matching is its own constraint group, projected
 //      after each iteration's averaged update (Gauss-Seidel across groups, Jacobi within one,
@@ -687,6 +688,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // 3. Jacobi iterations
   const int with_friction = s.accurate_friction ? 1 : 0;
+  const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
+  float omega = 1.0f;
+  if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
   for (int it = 0; it < iterations; ++it) {
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations)
@@ -697,7 +701,10 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       g.plane = plane_.data();
     }
     const float* p = p_.data();
-    float* next = p_next_.data();
+    // Chebyshev: the result overwrites the iterate before p_, which only grain i reads, for i
+    float* next = chebyshev ? p_before_.data() : p_next_.data();
+    omega = chebyshev ? gr_chebyshev_omega(it, s.chebyshev_rho, omega) : 1.0f;
+    const float om = omega;
 #pragma omp parallel num_threads(threads)
     {
       gr_normal_sums mine = acc;  // this thread's row scratch
@@ -705,10 +712,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp for schedule(dynamic, 256)
       for (long i = 0; i < ln; ++i) {
         int ii = static_cast<int>(i);
-        gr_store3(next, ii, gr_iterate(&g, &prm, p, ii, with_friction, &mine));
+        gr_float3 x = gr_iterate(&g, &prm, p, ii, with_friction, &mine);
+        if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
+        gr_store3(next, ii, x);
       }
     }
-    p_.swap(p_next_);
+    (chebyshev ? p_before_ : p_next_).swap(p_);
     if (shapes_on) project_shapes(threads);
   }
   if (pair_friction_pass || collider_friction_pass) {

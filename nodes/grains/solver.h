@@ -68,6 +68,9 @@ struct GrainsSettings {
   float drift_threshold = 0.0f;   // m/s: slower particles stay where they were
   float velocity_blend = 0.0f;    // 0: v from the positions; 1: keep the predicted v
   float over_relaxation = 1.0f;
+  // Chebyshev acceleration of the iterations (kernels/iterate.h): the estimated spectral radius
+  // rho of the Jacobi iteration, 0 = off. Not on the help page.
+  float chebyshev_rho = 0.0f;
   bool update_collisions_during_iterations = false;
   bool update_neighbors_during_iterations = false;
   bool final_collision_test = true;
@@ -151,6 +154,7 @@ class GrainsSolver {
   NeighborList neighbors_;
   // scratch, reused between substeps (n = grains this substep)
   std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
+  std::vector<float> p_before_;     // (n x 3) m: the iterate before p_ (Chebyshev only)
   std::vector<float> P0_;           // (n x 3) m: P at the start of the substep, minus the
                                     // substep's origin (local_origin in solver.cpp)
   std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0

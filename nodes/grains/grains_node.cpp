@@ -386,8 +386,8 @@ void register_grains_node() {
       ParamDecl::Float("velocity_blend", 0, "blend of the new velocity with the predicted one").range(0, 1),
       ParamDecl::Float("over_relaxation", 1, "scale of the averaged corrections; above 1 converges faster").range(0, 2),
       ParamDecl::Float("chebyshev_rho", 0,
-                       "Chebyshev acceleration of the iterations (not in POP Grains): the estimated spectral radius of the "
-                       "Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
+                       "Chebyshev acceleration of the iterations after the first 5 (not in POP Grains): the estimated "
+                       "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
           .range(0, 0.95),
       ParamDecl::Toggle("update_collisions_during_iterations", false, "re-find collider planes every iteration"),
       ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),

@@ -114,6 +114,13 @@ Vec3 ColliderState::velocity_at(const Vec3& p) const {
   return (p - carried_back(p)) / dt;
 }
 
+bool ColliderState::still() const {
+  for (int k = 0; k < 9; ++k)
+    if (pose.R[k] != prev_pose.R[k]) return false;
+  return pose.t.x == prev_pose.t.x && pose.t.y == prev_pose.t.y && pose.t.z == prev_pose.t.z &&
+         pose.s == prev_pose.s;
+}
+
 float ColliderState::sweep(const Vec3& a, const Vec3& b, float radius) const {
   // relative motion in the collider's local frame: start against the start pose, end against
   // the end pose; then sphere-trace the segment against the static local shape

@@ -58,6 +58,8 @@ struct ColliderState {
   // (end of substep, world), relative to the collider's own motion. Returns the fraction in
   // [0,1] of the first time its distance reaches `radius`, or a value > 1 when it never does.
   float sweep(const Vec3& a, const Vec3& b, float radius) const;
+  // True when the collider did not move over the substep (same pose, bit for bit).
+  bool still() const;
 };
 
 }  // namespace grains

@@ -128,9 +128,10 @@ struct SweptFriction {
 // applies it (`friction`) to the hit. An end point within r was in the iterations' contact
 // planes, which already had its friction. *hit receives the index of the last collider that
 // acted (unchanged when none did) and *hit_n its normal.
-void final_collision(const ColliderState* colliders, size_t collider_count, const Vec3& a,
-                     Vec3& b, Vec3& v, float r, const SweptFriction& friction, int32_t* hit,
-                     Vec3* hit_n) {
+// still[c]: collider c did not move over the substep (ColliderState::still).
+void final_collision(const ColliderState* colliders, const uint8_t* still, size_t collider_count,
+                     const Vec3& a, Vec3& b, Vec3& v, float r, const SweptFriction& friction,
+                     int32_t* hit, Vec3* hit_n) {
   for (size_t c = 0; c < collider_count; ++c) {
     const ColliderState& col = colliders[c];
     Vec3 n;
@@ -143,7 +144,7 @@ void final_collision(const ColliderState* colliders, size_t collider_count, cons
     // A still collider's signed distance changes by at most the distance moved, so a path that
     // ends more than r/2 + |b - a| away never came within r/2 of it: the sweep would find no
     // hit (checked with a 1% margin on r/2, far above the trace's tolerance and float error).
-    if (!near && e > 0.505f * r + length(b - a) && col.still()) continue;
+    if (!near && still[c] && e > 0.505f * r + length(b - a)) continue;
     float t_half = 2.0f;  // > 1: no hit
     if (!near || dot(b - a, n) > 0) t_half = col.sweep(a, b, 0.5f * r);
     if (!(t_half > 0.0f && t_half <= 1.0f)) {  // 0: started deep (and left), > 1: no hit
@@ -740,6 +741,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   {
     const float* p = p_.data();
     const bool final_test = s.final_collision_test && colliders_on;
+    std::vector<uint8_t> still(collider_count);
+    for (size_t c = 0; c < collider_count; ++c) still[c] = colliders[c].still() ? 1 : 0;
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
       int ii = static_cast<int>(i);
@@ -754,7 +757,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       if (final_test) {
         SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
                          s.static_threshold, s.scale_kinetic};
-        final_collision(colliders, collider_count, a, b, v, radius_[i], fr, &hit, &hit_n);
+        final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,
+                        &hit_n);
       }
       store3(d.P, i, b);
       store3(d.v, i, v);

@@ -43,6 +43,9 @@ struct BenchOptions {
   bool quick = false;
   int frames = 0;   // > 0 overrides every scene's frame count
   int threads = 0;  // <= 0: every core
+  // --repeat: each setting runs this many times, in rounds over all settings; its timings are
+  // the fastest run's (the results are bit-identical, so only timings differ)
+  int repeat = 1;
   std::string command;  // the command line, for the report
   // --features: the feature-cost table (app/bench_features.h) instead of the sweep
   bool features = false;

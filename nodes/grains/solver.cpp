@@ -253,7 +253,7 @@ void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, in
     dead = dead_.data();
   }
   const float decay = std::exp(-std::max(0.0f, s.strain_decay) * s.dt);
-  const float* P0 = P0_.data();
+  const float* P0 = P0_;
   float max_strain = 0;
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(max : max_strain)
   for (long p = 0; p < lm; ++p) {
@@ -314,7 +314,7 @@ void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, in
 // U V^T, a reflection flipped to a rotation), goal g_i = c + R rbar_i. Grains in no component
 // keep g_i = p_i. Parallel over components; each writes only its members.
 void GrainsSolver::shape_goals(const float* p, int threads) {
-  const long n = static_cast<long>(radius_.size());
+  const long n = static_cast<long>(n_);
   float* goal = shape_goal_.data();
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < n; ++i) store3(goal, i, load3(p, i));
@@ -361,7 +361,7 @@ void GrainsSolver::shape_goals(const float* p, int threads) {
 void GrainsSolver::project_shapes(int threads) {
   shape_goals(p_.data(), threads);
   p_.swap(shape_goal_);
-  if (plane_offsets_.size() != radius_.size() + 1) return;
+  if (plane_offsets_.size() != n_ + 1) return;
   float* p = p_.data();
   const long comps = static_cast<long>(comp_offsets_.size()) - 1;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
@@ -389,8 +389,8 @@ void GrainsSolver::project_shapes(int threads) {
 void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origin,
                                const ColliderState* colliders, size_t collider_count,
                                float query_scale, int threads) {
-  const long n = static_cast<long>(radius_.size());
-  const float* radius = radius_.data();
+  const long n = static_cast<long>(n_);
+  const float* radius = radius_;
   // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
   // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
   // toward where it came from still finds the surface it moved away from. Up to GR_MAX_PLANES
@@ -475,21 +475,44 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // per-grain inputs the kernels read: start positions, radius, mass, inverse mass (or
   // 1/shockmass)
-  radius_.resize(n);
-  mass_.resize(n);
+  // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
+  const bool constraints_on =
+      s.constraint_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
+  n_ = n;
   inv_mass_.resize(n);
-  P0_.resize(3 * n);
+  // the caller's arrays where they serve as they are; copies free their memory when not needed
+  auto drop = [](std::vector<float>& v) {
+    if (v.capacity()) std::vector<float>().swap(v);
+  };
+  if (shifted || constraints_on) {
+    P0_copy_.resize(3 * n);
 #pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < ln; ++i) store3(P0_.data(), i, load3(d.P, i) - origin);
-  const float default_radius = 0.5f * s.particle_separation;
+    for (long i = 0; i < ln; ++i) store3(P0_copy_.data(), i, load3(d.P, i) - origin);
+    P0_ = P0_copy_.data();
+  } else {
+    drop(P0_copy_);
+    P0_ = d.P;  // minus an origin of 0: the same floats
+  }
+  if (d.pscale) {
+    drop(radius_copy_);
+    radius_ = d.pscale;
+  } else {
+    radius_copy_.assign(n, 0.5f * s.particle_separation);
+    radius_ = radius_copy_.data();
+  }
+  if (d.mass) {
+    drop(mass_copy_);
+    mass_ = d.mass;
+  } else {
+    mass_copy_.assign(n, 1.0f);
+    mass_ = mass_copy_.data();
+  }
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
-    radius_[i] = d.pscale ? d.pscale[i] : default_radius;
-    float m = d.mass ? d.mass[i] : 1.0f;
-    mass_[i] = m;
+    const float m = mass_[i];
     if (s.mass_shock == MassShock::Global) {
       // written "prior to iterating" (help page), from the start-of-substep position
-      float sm = gr_shockmass(&prm, m, gr_load3(P0_.data(), static_cast<int>(i)));
+      float sm = gr_shockmass(&prm, m, gr_load3(P0_, static_cast<int>(i)));
       if (d.shockmass) d.shockmass[i] = sm;
       inv_mass_[i] = sm > 0 ? 1.0f / sm : 0.0f;
     } else {
@@ -504,11 +527,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   gr_grains g;
   std::memset(&g, 0, sizeof g);
-  g.P = P0_.data();
+  g.P = P0_;
   g.v = d.v;
   g.force = d.force;
-  g.mass = mass_.data();
-  g.radius = radius_.data();
+  g.mass = mass_;
+  g.radius = radius_;
   g.inv_mass = inv_mass_.data();
   {
     // equal grains: the contact loop's fast path reads neither radius nor inverse mass
@@ -595,9 +618,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     shape_goal_.resize(3 * n);
   }
 
-  // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
-  const bool constraints_on =
-      s.constraint_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
+  // explicit constraints (constraints_on above)
   if (constraints_on) {
     build_constraints(d);
     g.con_offsets = con_offsets_.data();
@@ -636,7 +657,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // superset of the true candidates. With equal radii that is the same set, found faster; with
   // mixed radii small grains gather farther candidates and max_neighbors fills with them, so the
   // toggle is for scenes whose grains share one size (help page "Assume Uniform Radius").
-  const float* search_radius = radius_.data();
+  const float* search_radius = radius_;
   if (s.assume_uniform_radius && !(g.uniform_radius > 0)) {  // equal radii need no copy
     float r_max = 0;
     for (size_t i = 0; i < n; ++i) r_max = std::max(r_max, radius_[i]);
@@ -685,7 +706,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (pairs_on) find_pairs(true);
   if (colliders_on) {
-    find_planes(P0_.data(), p_.data(), origin, colliders, collider_count,
+    find_planes(P0_, p_.data(), origin, colliders, collider_count,
                 s.neighbor_query_scale, threads);
     g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
@@ -700,7 +721,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations)
     {
-      find_planes(P0_.data(), p_.data(), origin, colliders, collider_count,
+      find_planes(P0_, p_.data(), origin, colliders, collider_count,
                   s.neighbor_query_scale, threads);
       g.plane_offsets = plane_offsets_.data();
       g.plane = plane_.data();

@@ -155,8 +155,11 @@ class GrainsSolver {
   // scratch, reused between substeps (n = grains this substep)
   std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
   std::vector<float> p_before_;     // (n x 3) m: the iterate before p_ (Chebyshev only)
-  std::vector<float> P0_;           // (n x 3) m: P at the start of the substep, minus the
-                                    // substep's origin (local_origin in solver.cpp)
+  // P at the start of the substep, minus the substep's origin (local_origin in solver.cpp):
+  // the caller's P itself when that origin is 0, else P0_ (n x 3, m); explicit constraints
+  // always take the copy, because their strain update reads it after P is overwritten
+  const float* P0_ = nullptr;
+  std::vector<float> P0_copy_;
   std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0
   // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
   std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
@@ -165,8 +168,13 @@ class GrainsSolver {
   std::vector<float> collider_normal_;               // (n) m
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
   std::vector<float> search_radius_;  // (n) m: the largest radius, with assume_uniform_radius
-  std::vector<float> radius_;       // (n) m: pscale, or particle_separation / 2 when missing
-  std::vector<float> mass_;         // (n) kg: copy of mass, or 1 when missing
+  // (n) m: the caller's pscale, or radius_copy_ = particle_separation / 2 when it has none
+  const float* radius_ = nullptr;
+  std::vector<float> radius_copy_;
+  // (n) kg: the caller's mass, or mass_copy_ = 1 when it has none
+  const float* mass_ = nullptr;
+  std::vector<float> mass_copy_;
+  size_t n_ = 0;                    // grains this substep
   std::vector<float> inv_mass_;     // (n) 1/kg: 1/mass, or 1/shockmass (global mass-shock)
   // collider planes, a compact row per grain (at most GR_MAX_PLANES, nearest first)
   std::vector<uint32_t> plane_offsets_;  // (n + 1)

@@ -82,9 +82,45 @@ inline uint64_t pair_key(double d2, uint32_t j) {
 // branches of nth_element and insertion sort: a crushed 100k pile's lists hold 64 to 112
 // candidates before the cut to max_neighbors, and ranking took its 8 substeps from 3.91-3.94 s
 // to 3.46-3.78 s of CPU.
+// Before ranking, a list longer than K is cut at the smallest of the distances dmax * q / 32
+// (q = 1..32, found by bisection over vectorised counts) that has at least K keys at or below
+// it: every key cut is farther than every key kept, so the cut is exact, and only the keys up
+// to about the K-th nearest are ranked. On the settled 100k pile the ranking had taken 8.6% of
+// the CPU (perf); cut first, ranking and cut take 2.2% and 4%, and 4 frames on one thread went
+// from 3.25-3.41 s to 3.06-3.22 s.
 constexpr uint32_t kRankMax = 128;
 inline uint32_t finish_candidates(uint64_t* c, uint32_t m, int K) {
   const uint32_t keep = K > 0 ? std::min(m, uint32_t(K)) : m;
+  if (keep < m && m <= kRankMax) {
+    float d[kRankMax];
+    float dmax = 0;
+    for (uint32_t a = 0; a < m; ++a) {
+      d[a] = std::bit_cast<float>(uint32_t(c[a] >> 32));
+      dmax = std::max(dmax, d[a]);
+    }
+    if (dmax > 0 && std::isfinite(dmax)) {
+      auto at_most = [&](float t) {
+        uint32_t count = 0;
+        for (uint32_t a = 0; a < m; ++a) count += d[a] <= t;
+        return count;
+      };
+      uint32_t lo = 0, hi = 32;  // at_most(dmax * hi / 32) = m >= keep
+      while (hi - lo > 1) {
+        const uint32_t mid = (lo + hi) / 2;
+        if (at_most(dmax * (float(mid) / 32)) >= keep)
+          hi = mid;
+        else
+          lo = mid;
+      }
+      const float cut = hi == 32 ? dmax : dmax * (float(hi) / 32);
+      uint32_t kept = 0;
+      for (uint32_t a = 0; a < m; ++a) {  // branch-free: which keys stay is unpredictable
+        c[kept] = c[a];
+        kept += d[a] <= cut;
+      }
+      m = kept;
+    }
+  }
   if (m <= kRankMax) {
     uint64_t v[kRankMax], rank[kRankMax];
     for (uint32_t a = 0; a < m; ++a) v[a] = c[a], rank[a] = 0;

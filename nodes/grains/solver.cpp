@@ -630,8 +630,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 
   // 1. predict
-  p_.resize(3 * n);
-  p_next_.resize(3 * n);
+  // one float past the last grain: the contact loop loads positions 4 floats at a time
+  p_.resize(3 * n + 1);
+  p_next_.resize(3 * n + 1);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) gr_predict(&g, &prm, p_.data(), static_cast<int>(i));
 
@@ -683,7 +684,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     const size_t entries = neighbors_.indices.size();
     size_t longest = 0;
     for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
-    row_length_ = std::max<size_t>(longest, 1);
+    // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
+    row_length_ = (std::max<size_t>(longest, 1) + GR_LANES - 1) / GR_LANES * GR_LANES;
     pair_normal_it_.resize(row_length_ * size_t(threads));
     if (first) {
       pair_normal_.assign(entries, 0u);  // the bits of 0.0f

@@ -66,6 +66,56 @@ GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
  * w / (w + w) is exactly 1/2, and a candidate costs only its position; the arithmetic is the
  * same, so the result is bit-identical to the general loop's. */
 #define GR_LANES 8
+/* one block of GR_LANES candidates from entry k: see gr_gather_contacts_lanes. `tail` (a constant
+ * at each call): the block may run past the row's end e, so lanes past it repeat entry e - 1
+ * and contribute 0; a full block reads its GR_LANES indices as one contiguous run. */
+GR_INLINE void gr_contact_block(const gr_grains* g, const GR_GLOBAL float* p, int i, float px,
+                                float py, float pz, float ri, float wi, float repulse, gr_uint k,
+                                gr_uint e, float* lx, float* ly, float* lz, float* lc, float* ld,
+                                const int uniform, const int tail) {
+  const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
+  int l;
+  int jl[GR_LANES];
+  float qx[GR_LANES], qy[GR_LANES], qz[GR_LANES];
+  for (l = 0; l < GR_LANES; ++l) jl[l] = (int)nbr[(tail ? k + (gr_uint)l < e : 1) ? k + (gr_uint)l : e - 1];
+  gr_load_block(p, jl, qx, qy, qz);
+  for (l = 0; l < GR_LANES; ++l) {
+    const int live = tail ? k + (gr_uint)l < e : 1;
+    const int j = jl[l];
+    const float dx = px - qx[l], dy = py - qy[l], dz = pz - qz[l];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float rsum = ri + (uniform ? ri : g->radius[j]);
+    const float dist = gr_sqrt(d2);
+    const float wsum = wi + (uniform ? wi : g->inv_mass[j]);
+    const int touching = (d2 < rsum * rsum) & (j != i) & (wsum > 0.0f);
+    const float d = touching ? rsum - dist : 0.0f;
+    /* correction length share * d * repulse along n = x_ij / dist */
+    const float share = uniform ? 0.5f : wi / wsum;
+    const float f = (touching & live) ? share * d * repulse : 0.0f;
+    const float along = dist > 0.0f ? f / dist : 0.0f;
+    const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
+    lx[l] += along * dx;
+    ly[l] += along * dy + apart_y;
+    lz[l] += along * dz;
+    lc[l] += f != 0.0f ? 1.0f : 0.0f;
+    ld[l] = d;
+  }
+}
+
+/* The common case of gr_gather_pairs: contacts only (no clumping, friction after the loop, no
+ * constraint adjacency, no local mass-shock). The same eq. 22 correction, written without
+ * branches over blocks of GR_LANES candidates so the compiler turns each block into vector
+ * instructions: every candidate is computed, and one that is apart, past the end of the row or
+ * i itself contributes 0. Lanes past the end repeat the row's last entry, so the block never
+ * reads outside the row. Each lane keeps its own sums, added in lane order at the end: the
+ * result depends on the row, not on the thread count. Coincident grains separate along -+y by
+ * index, as gr_pair_normal. Shares w_i / (w_i + w_j) with global mass-shock come from inv_mass.
+ * `uniform` (a constant at each call, so each call site compiles its own loop): every grain has
+ * g->uniform_radius and g->uniform_inv_mass, so the summed radii are 2r and the share
+ * w / (w + w) is exactly 1/2, and a candidate costs only its position; the arithmetic is the
+ * same, so the result is bit-identical to the general loop's. A block's positions come in
+ * through gr_load_block, so p must hold 3 n + 1 floats. overlap_out, when not null, gets whole
+ * blocks: it must hold the row's length rounded up to a multiple of GR_LANES. */
 GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p, int i,
                                     float repulse, GR_GLOBAL float* overlap_out, gr_float3* sum,
                                     const int uniform) {
@@ -73,36 +123,17 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
   const float ri = uniform ? g->uniform_radius : g->radius[i];
   const float wi = uniform ? g->uniform_inv_mass : g->inv_mass[i];
   const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
-  const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
   float lx[GR_LANES], ly[GR_LANES], lz[GR_LANES], lc[GR_LANES], ld[GR_LANES];
   gr_uint k;
   int l;
   for (l = 0; l < GR_LANES; ++l) lx[l] = ly[l] = lz[l] = lc[l] = 0.0f;
   for (k = b; k < e; k += GR_LANES) {
-    for (l = 0; l < GR_LANES; ++l) {
-      const int live = k + (gr_uint)l < e;
-      const gr_uint kk = live ? k + (gr_uint)l : e - 1;
-      const int j = (int)nbr[kk];
-      const float dx = px - p[3 * j], dy = py - p[3 * j + 1], dz = pz - p[3 * j + 2];
-      const float d2 = dx * dx + dy * dy + dz * dz;
-      const float rsum = ri + (uniform ? ri : g->radius[j]);
-      const float dist = gr_sqrt(d2);
-      const float wsum = wi + (uniform ? wi : g->inv_mass[j]);
-      const int touching = (d2 < rsum * rsum) & (j != i) & (wsum > 0.0f);
-      const float d = touching ? rsum - dist : 0.0f;
-      /* correction length share * d * repulse along n = x_ij / dist */
-      const float share = uniform ? 0.5f : wi / wsum;
-      const float f = (touching & live) ? share * d * repulse : 0.0f;
-      const float along = dist > 0.0f ? f / dist : 0.0f;
-      const float apart_y = dist > 0.0f ? 0.0f : (i < j ? -f : f);
-      lx[l] += along * dx;
-      ly[l] += along * dy + apart_y;
-      lz[l] += along * dz;
-      lc[l] += f != 0.0f ? 1.0f : 0.0f;
-      ld[l] = d;
-    }
+    if (k + GR_LANES <= e)
+      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, ld, uniform, 0);
+    else
+      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, ld, uniform, 1);
     if (overlap_out)
-      for (l = 0; l < GR_LANES && k + (gr_uint)l < e; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
+      for (l = 0; l < GR_LANES; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
   }
   {
     float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;

@@ -77,6 +77,38 @@ GR_INLINE gr_uint gr_as_uint(float f) { return __builtin_bit_cast(gr_uint, f); }
 
 #endif
 
+/* the positions of 8 grains j[0..7] of (n x 3) array a into x, y, z (gr_gather_contacts_lanes) */
+#if !(defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)) && defined(__AVX2__)
+#include <immintrin.h>
+/* AVX2: one 4-float load per grain (reads a[3 j + 3]: a holds 3 n + 1 floats) and a transpose,
+ * instead of three 8-lane gathers */
+GR_INLINE void gr_load_block(const float* a, const int* j, float* x, float* y, float* z) {
+  __m256 r0 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[4]), _mm_loadu_ps(a + 3 * j[0]));
+  __m256 r1 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[5]), _mm_loadu_ps(a + 3 * j[1]));
+  __m256 r2 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[6]), _mm_loadu_ps(a + 3 * j[2]));
+  __m256 r3 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[7]), _mm_loadu_ps(a + 3 * j[3]));
+  __m256 t0 = _mm256_unpacklo_ps(r0, r1); /* x0 x1 y0 y1 | x4 x5 y4 y5 */
+  __m256 t1 = _mm256_unpackhi_ps(r0, r1); /* z0 z1 .. .. | z4 z5 .. .. */
+  __m256 t2 = _mm256_unpacklo_ps(r2, r3); /* x2 x3 y2 y3 | x6 x7 y6 y7 */
+  __m256 t3 = _mm256_unpackhi_ps(r2, r3); /* z2 z3 .. .. | z6 z7 .. .. */
+  __m256 vx = _mm256_shuffle_ps(t0, t2, 0x44); /* x0 x1 x2 x3 | x4 x5 x6 x7 */
+  __m256 vy = _mm256_shuffle_ps(t0, t2, 0xEE);
+  __m256 vz = _mm256_shuffle_ps(t1, t3, 0x44);
+  _mm256_storeu_ps(x, vx);
+  _mm256_storeu_ps(y, vy);
+  _mm256_storeu_ps(z, vz);
+}
+#else
+GR_INLINE void gr_load_block(const GR_GLOBAL float* a, const int* j, float* x, float* y, float* z) {
+  int l;
+  for (l = 0; l < 8; ++l) {
+    x[l] = a[3 * j[l]];
+    y[l] = a[3 * j[l] + 1];
+    z[l] = a[3 * j[l] + 2];
+  }
+}
+#endif
+
 GR_INLINE float gr_length(gr_float3 a) { return gr_sqrt(gr_dot(a, a)); }
 /* a + s * b */
 GR_INLINE gr_float3 gr_madd(gr_float3 a, gr_float3 b, float s) { return gr_add(a, gr_scale(b, s)); }

@@ -210,11 +210,15 @@ struct PenetrationSums {
 };
 
 // Penetration of spheres of one radius r, without neighbour lists: a counting sort into cells 2r
-// wide, then each point scans the 27 cells around its own for partners of higher index. Points
-// are taken in fixed blocks whose sums are added in block order, so the result is the same for
-// any thread count. Memory is three integers per point plus the cells. Returns false, having
-// measured nothing, when the box would need more than 8 cells per point (sparse outliers): the
-// caller then uses the general search.
+// wide, then each point, in cell order, scans the 3 x 3 runs of 3 cells along x around its own
+// for partners later in that order (each pair once). Positions are copied in cell order, so
+// the scans read contiguous memory, and the scan does not branch on whether a pair touches
+// (unpredictable), so the compiler vectorises it. Points are taken in fixed blocks whose sums
+// are added in block order, so the result is the same for any thread count. Memory is six
+// numbers per point plus the cells. Returns false, having measured nothing, when the box would
+// need more than 8 cells per point (sparse outliers): the caller then uses the general search.
+// (It had taken 8.7-10.6% of `grains run`'s CPU on a settled 100k pile when it scanned in
+// point order with a branch per pair.)
 bool penetration_uniform(const float* P, size_t n, float r, PenetrationSums& total) {
   const float inf = std::numeric_limits<float>::infinity();
   float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
@@ -235,37 +239,54 @@ bool penetration_uniform(const float* P, size_t n, float r, PenetrationSums& tot
     return u >= 0 ? std::min<int64_t>(int64_t(u), dim[a] - 1) : int64_t(0);
   };
   const uint32_t none = UINT32_MAX;
-  std::vector<uint32_t> key(n), order(n), start(size_t(cells) + 1, 0);
+  std::vector<uint32_t> key(n), start(size_t(cells) + 1, 0);
   for (size_t i = 0; i < n; ++i) {
     bool finite = std::isfinite(P[3 * i]) && std::isfinite(P[3 * i + 1]) && std::isfinite(P[3 * i + 2]);
     key[i] = finite ? uint32_t((coord(i, 2) * dim[1] + coord(i, 1)) * dim[0] + coord(i, 0)) : none;
     if (key[i] != none) ++start[key[i] + 1];
   }
   for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
-  std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-  for (size_t i = 0; i < n; ++i)
-    if (key[i] != none) order[fill[key[i]]++] = uint32_t(i);
-  const float rsum = 2.0f * r;
+  const size_t m = start.back();  // finite points
+  std::vector<float> X(m), Y(m), Z(m);
+  std::vector<uint32_t> cell_of(m);
+  {
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < n; ++i)
+      if (key[i] != none) {
+        const uint32_t s = fill[key[i]]++;
+        X[s] = P[3 * i], Y[s] = P[3 * i + 1], Z[s] = P[3 * i + 2];
+        cell_of[s] = key[i];
+      }
+  }
+  const float rsum = 2.0f * r, inv_rsum = 1.0f / rsum;
   constexpr size_t kBlock = 1024;
-  const ptrdiff_t blocks = ptrdiff_t((n + kBlock - 1) / kBlock);
+  const ptrdiff_t blocks = ptrdiff_t((m + kBlock - 1) / kBlock);
   std::vector<PenetrationSums> part(static_cast<size_t>(blocks));
 #pragma omp parallel for schedule(dynamic, 1)
   for (ptrdiff_t b = 0; b < blocks; ++b) {
     PenetrationSums acc;
-    for (size_t i = size_t(b) * kBlock; i < std::min(n, size_t(b + 1) * kBlock); ++i) {
-      if (key[i] == none) continue;
-      const int64_t c[3] = {coord(i, 0), coord(i, 1), coord(i, 2)};
-      for (int64_t z = std::max<int64_t>(c[2] - 1, 0); z <= std::min(c[2] + 1, dim[2] - 1); ++z)
-        for (int64_t y = std::max<int64_t>(c[1] - 1, 0); y <= std::min(c[1] + 1, dim[1] - 1); ++y)
-          for (int64_t x = std::max<int64_t>(c[0] - 1, 0); x <= std::min(c[0] + 1, dim[0] - 1); ++x) {
-            const size_t cell = size_t((z * dim[1] + y) * dim[0] + x);
-            for (uint32_t k = start[cell]; k < start[cell + 1]; ++k) {
-              const uint32_t j = order[k];
-              if (j <= i) continue;
-              const float overlap = rsum - length(load3(P, i) - load3(P, j));
-              if (overlap > 0) acc.add(overlap / rsum);
-            }
+    for (size_t s = size_t(b) * kBlock; s < std::min(m, size_t(b + 1) * kBlock); ++s) {
+      const int64_t key_s = cell_of[s];
+      const int64_t cx = key_s % dim[0], cy = key_s / dim[0] % dim[1], cz = key_s / dim[0] / dim[1];
+      const int64_t x0 = std::max<int64_t>(cx - 1, 0), x1 = std::min(cx + 1, dim[0] - 1);
+      const float px = X[s], py = Y[s], pz = Z[s];
+      for (int64_t z = std::max<int64_t>(cz - 1, 0); z <= std::min(cz + 1, dim[2] - 1); ++z)
+        for (int64_t y = std::max<int64_t>(cy - 1, 0); y <= std::min(cy + 1, dim[1] - 1); ++y) {
+          const size_t row = size_t((z * dim[1] + y) * dim[0]);
+          const size_t k0 = std::max<size_t>(start[row + x0], s + 1), k1 = start[row + x1 + 1];
+          float sum = 0, count = 0, mx = 0;
+          for (size_t k = k0; k < k1; ++k) {
+            const float dx = px - X[k], dy = py - Y[k], dz = pz - Z[k];
+            const float pen = (rsum - std::sqrt(dx * dx + dy * dy + dz * dz)) * inv_rsum;
+            const bool touching = pen > 0;
+            sum += touching ? pen : 0.0f;
+            count += touching ? 1.0f : 0.0f;
+            mx = std::max(mx, touching ? pen : 0.0f);
           }
+          acc.sum += sum;
+          acc.count += size_t(count);
+          acc.max = std::max(acc.max, mx);
+        }
     }
     part[size_t(b)] = acc;
   }

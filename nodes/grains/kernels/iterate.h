@@ -95,8 +95,10 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
     float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {
       gr_uint k;
-      const gr_uint b = g->nbr_offsets[i];
-      for (k = b; k < g->nbr_offsets[i + 1]; ++k)
+      /* bounds read once: the stores below could otherwise alias them, and the loop would not
+       * vectorise */
+      const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
+      for (k = b; k < e; ++k)
         acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
     }
     if (acc->collider && g->plane_offsets) {

@@ -1,0 +1,37 @@
+#include <catch2/catch.hpp>
+
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "nodes/grains/kernels/prelude.h"
+
+void load_block_portable(const float* a, const int* j, float* x, float* y, float* z);
+
+TEST_CASE("the contact loop's block load reads the same positions on every path", "[grains]") {
+  // n grains in 3 n + 1 floats (the solver's iterates), every float distinct, so a lane that
+  // read the wrong grain or the wrong coordinate cannot match; blocks include grain 0, the last
+  // grain (whose load reads the padding float) and repeated grains (a row's tail)
+  const int n = 1000;
+  std::vector<float> a(3 * n + 1);
+  for (size_t k = 0; k < a.size(); ++k) a[k] = 0.5f + float(k);
+  std::mt19937 rng(3);
+  for (int block = 0; block < 200; ++block) {
+    int j[8];
+    for (int l = 0; l < 8; ++l) j[l] = int(rng() % n);
+    if (block == 0) j[0] = 0, j[7] = n - 1;
+    if (block == 1) for (int l = 3; l < 8; ++l) j[l] = n - 1;
+    float x[8], y[8], z[8], px[8], py[8], pz[8];
+    gr_load_block(a.data(), j, x, y, z);
+    load_block_portable(a.data(), j, px, py, pz);
+    for (int l = 0; l < 8; ++l) {
+      INFO("block " << block << " lane " << l << " grain " << j[l]);
+      CHECK(x[l] == a[3 * j[l]]);
+      CHECK(y[l] == a[3 * j[l] + 1]);
+      CHECK(z[l] == a[3 * j[l] + 2]);
+      CHECK(std::memcmp(&x[l], &px[l], sizeof(float)) == 0);
+      CHECK(std::memcmp(&y[l], &py[l], sizeof(float)) == 0);
+      CHECK(std::memcmp(&z[l], &pz[l], sizeof(float)) == 0);
+    }
+  }
+}

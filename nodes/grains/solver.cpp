@@ -212,6 +212,37 @@ Vec3 local_origin(const float* P, size_t n, int threads) {
 
 // The constraint adjacency: row i lists (other endpoint, primitive) for every valid primitive
 // touching grain i, in primitive order (a serial fill: deterministic, O(m)).
+void GrainsSolver::drop_constrained_pairs(int threads) {
+  const size_t n = neighbors_.offsets.size() - 1;
+  const long ln = static_cast<long>(n);
+  uint32_t* idx = neighbors_.indices.data();
+  const uint32_t* off = neighbors_.offsets.data();
+  row_kept_.resize(n);
+  // each row keeps its unconstrained entries at its front, in order
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    const uint32_t cb = con_offsets_[i], ce = con_offsets_[i + 1];
+    uint32_t w = off[i];
+    for (uint32_t k = off[i]; k < off[i + 1]; ++k) {
+      const uint32_t j = idx[k];
+      bool joined = false;
+      for (uint32_t c = cb; c < ce; ++c) joined |= con_other_[c] == j;
+      if (!joined) idx[w++] = j;
+    }
+    row_kept_[i] = w - off[i];
+  }
+  // close the gaps: a row moves only towards the front, so rows are moved in order
+  uint32_t total = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t from = neighbors_.offsets[i], kept = row_kept_[i];
+    neighbors_.offsets[i] = total;
+    if (from != total) std::memmove(idx + total, idx + from, kept * sizeof(uint32_t));
+    total += kept;
+  }
+  neighbors_.offsets[n] = total;
+  neighbors_.indices.resize(total);
+}
+
 void GrainsSolver::build_constraints(const GrainsData& d) {
   const size_t n = d.n, m = d.prim_count;
   const int32_t* e = d.prim_points;
@@ -678,6 +709,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     // carry the sums over and use the search's own store.
     search_.find(p_.data(), search_radius, n, q, neighbors_,
                  first && pair_friction_pass ? &pair_normal_ : nullptr);
+    // mutually constrained grains that do not collide: drop their pairs once here rather than
+    // look each one up in every iteration; rows keep their order and their max_neighbors cut
+    if (constraints_on && !s.collide_mutually_constrained) {
+      drop_constrained_pairs(threads);
+      g.nbr_unconstrained = 1;
+    }
     g.nbr_offsets = neighbors_.offsets.data();
     g.nbr_indices = neighbors_.indices.data();
     if (!pair_friction_pass) return;

@@ -142,6 +142,9 @@ class GrainsSolver {
 
  private:
   void build_constraints(const GrainsData& d);
+  // leaves out of neighbors_ every pair joined by an explicit constraint (con_offsets_ and
+  // con_other_ built); keeps each row's order
+  void drop_constrained_pairs(int threads);
   void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
   void shape_goals(const float* p, int threads);
   void project_shapes(int threads);
@@ -165,6 +168,7 @@ class GrainsSolver {
   std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
   std::vector<float> pair_normal_it_;  // (threads x row_length_) m: this iteration's overlaps
   size_t row_length_ = 1;              // the longest neighbour row
+  std::vector<uint32_t> row_kept_;     // (n) entries each row keeps, in drop_constrained_pairs
   std::vector<float> collider_normal_;               // (n) m
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
   std::vector<float> search_radius_;  // (n) m: the largest radius, with assume_uniform_radius

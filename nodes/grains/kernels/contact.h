@@ -168,7 +168,7 @@ GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR
   /* squared reach of a candidate that can act, in units of (r_i + r_j)^2 */
   float reach2 = clump > 0.0f ? prm->query_scale * prm->query_scale : 1.0f;
   int fric = with_friction && prm->friction_with_particles > 0.0f;
-  int skip_constrained = g->con_offsets && !prm->collide_constrained;
+  int skip_constrained = g->con_offsets && !prm->collide_constrained && !g->nbr_unconstrained;
   if (!(clump > 0.0f) && !fric && !skip_constrained && prm->mass_shock != 2) {
     if (!(repulse > 0.0f)) {
       if (overlap_out)

@@ -64,6 +64,10 @@ typedef struct {
   const GR_GLOBAL float* attractionstiffness; /* (n) optional */
   const GR_GLOBAL gr_uint* nbr_offsets;       /* (n + 1) neighbour rows, or null: no pairs */
   const GR_GLOBAL gr_uint* nbr_indices;
+  /* 1 when the rows already leave out every pair joined by an explicit constraint (the host
+   * drops them once per search when mutually constrained grains do not collide), so the
+   * contact loop need not look each pair up in the constraint adjacency */
+  int nbr_unconstrained;
   /* collider contact planes: row i lists grain i's planes (at most GR_MAX_PLANES, nearest
    * first), entries [plane_offsets[i], plane_offsets[i + 1]) of `plane`, 9 floats each: surface
    * point (m), unit normal, surface velocity (m/s). Stored compactly: a grain far from every

@@ -210,8 +210,6 @@ Vec3 local_origin(const float* P, size_t n, int threads) {
 
 }  // namespace
 
-// The constraint adjacency: row i lists (other endpoint, primitive) for every valid primitive
-// touching grain i, in primitive order (a serial fill: deterministic, O(m)).
 void GrainsSolver::drop_constrained_pairs(int threads) {
   const size_t n = neighbors_.offsets.size() - 1;
   const long ln = static_cast<long>(n);
@@ -243,6 +241,8 @@ void GrainsSolver::drop_constrained_pairs(int threads) {
   neighbors_.indices.resize(total);
 }
 
+// The constraint adjacency: row i lists (other endpoint, primitive) for every valid primitive
+// touching grain i, in primitive order (a serial fill: deterministic, O(m)).
 void GrainsSolver::build_constraints(const GrainsData& d) {
   const size_t n = d.n, m = d.prim_count;
   const int32_t* e = d.prim_points;

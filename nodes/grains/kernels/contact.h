@@ -66,6 +66,8 @@ GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
  * w / (w + w) is exactly 1/2, and a candidate costs only its position; the arithmetic is the
  * same, so the result is bit-identical to the general loop's. */
 #define GR_LANES 8
+/* gr_load_block (prelude.h) loads blocks of exactly 8 */
+typedef char gr_lanes_match_load_block[GR_LANES == 8 ? 1 : -1];
 /* one block of GR_LANES candidates from entry k: see gr_gather_contacts_lanes. `tail` (a constant
  * at each call): the block may run past the row's end e, so lanes past it repeat entry e - 1
  * and contribute 0; a full block reads its GR_LANES indices as one contiguous run. */

@@ -723,7 +723,10 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
     // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
     row_length_ = (std::max<size_t>(longest, 1) + GR_LANES - 1) / GR_LANES * GR_LANES;
-    pair_normal_it_.resize(row_length_ * size_t(threads));
+    // each thread's row a whole number of cache lines apart from the next one's, plus a line:
+    // threads writing one line between them every grain would pass it back and forth
+    row_stride_ = (row_length_ + 15) / 16 * 16 + 16;
+    pair_normal_it_.resize(row_stride_ * size_t(threads));
     if (first) {
       pair_normal_.assign(entries, 0u);  // the bits of 0.0f
     } else {
@@ -773,8 +776,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp parallel num_threads(threads)
     {
       gr_normal_sums mine = acc;  // this thread's row scratch
-      if (mine.pair_iteration) mine.pair_iteration += row_length_ * size_t(omp_get_thread_num());
-#pragma omp for schedule(dynamic, 256)
+      if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
+      // static: a thread takes the same grains every iteration, so the positions it reads were
+      // mostly written by itself and stay in its core's cache (with chunks handed out as they
+      // come, half the reads fetched lines the other core had just written)
+#pragma omp for schedule(static)
       for (long i = 0; i < ln; ++i) {
         int ii = static_cast<int>(i);
         gr_float3 x = gr_iterate(&g, &prm, p, ii, with_friction, &mine);
@@ -788,7 +794,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (pair_friction_pass || collider_friction_pass) {
     const float* p = p_.data();
     float* next = p_next_.data();
-#pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
+#pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
       int ii = static_cast<int>(i);
       gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));

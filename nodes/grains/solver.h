@@ -166,8 +166,9 @@ class GrainsSolver {
   std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0
   // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
   std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
-  std::vector<float> pair_normal_it_;  // (threads x row_length_) m: this iteration's overlaps
+  std::vector<float> pair_normal_it_;  // (threads x row_stride_) m: this iteration's overlaps
   size_t row_length_ = 1;              // the longest neighbour row
+  size_t row_stride_ = 1;              // floats between threads' rows in pair_normal_it_
   std::vector<uint32_t> row_kept_;     // (n) entries each row keeps, in drop_constrained_pairs
   std::vector<float> collider_normal_;               // (n) m
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums

@@ -53,18 +53,7 @@ GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
   return gr_scale(gr_friction(dx, n, bound, prm->static_threshold, prm->scale_kinetic), share);
 }
 
-/* The common case of gr_gather_pairs: contacts only (no clumping, friction after the loop, no
- * constraint adjacency, no local mass-shock). The same eq. 22 correction, written without
- * branches over blocks of GR_LANES candidates so the compiler turns each block into vector
- * instructions: every candidate is computed, and one that is apart, past the end of the row or
- * i itself contributes 0. Lanes past the end repeat the row's last entry, so the block never
- * reads outside the row. Each lane keeps its own sums, added in lane order at the end: the
- * result depends on the row, not on the thread count. Coincident grains separate along -+y by
- * index, as gr_pair_normal. Shares w_i / (w_i + w_j) with global mass-shock come from inv_mass.
- * `uniform` (a constant at each call, so each call site compiles its own loop): every grain has
- * g->uniform_radius and g->uniform_inv_mass, so the summed radii are 2r and the share
- * w / (w + w) is exactly 1/2, and a candidate costs only its position; the arithmetic is the
- * same, so the result is bit-identical to the general loop's. */
+/* the contact loop's lanes: gr_gather_contacts_lanes */
 #define GR_LANES 8
 /* gr_load_block (prelude.h) loads blocks of exactly 8 */
 typedef char gr_lanes_match_load_block[GR_LANES == 8 ? 1 : -1];
@@ -130,12 +119,13 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
   int l;
   for (l = 0; l < GR_LANES; ++l) lx[l] = ly[l] = lz[l] = lc[l] = 0.0f;
   for (k = b; k < e; k += GR_LANES) {
+    /* the block stores its overlaps where they go, as one vector (a copy after it had been
+     * 8 scalar moves) */
+    float* out = overlap_out ? overlap_out + (k - b) : ld;
     if (k + GR_LANES <= e)
-      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, ld, uniform, 0);
+      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, out, uniform, 0);
     else
-      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, ld, uniform, 1);
-    if (overlap_out)
-      for (l = 0; l < GR_LANES; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
+      gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, out, uniform, 1);
   }
   {
     float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;

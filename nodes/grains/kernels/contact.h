@@ -66,13 +66,13 @@ GR_INLINE void gr_contact_block(const gr_grains* g, const GR_GLOBAL float* p, in
                                 const int uniform, const int tail) {
   const GR_GLOBAL gr_uint* nbr = g->nbr_indices;
   int l;
-  int jl[GR_LANES];
+  gr_uint jl[GR_LANES]; /* unsigned: an index widens to an address without a sign extension */
   float qx[GR_LANES], qy[GR_LANES], qz[GR_LANES];
-  for (l = 0; l < GR_LANES; ++l) jl[l] = (int)nbr[(tail ? k + (gr_uint)l < e : 1) ? k + (gr_uint)l : e - 1];
+  for (l = 0; l < GR_LANES; ++l) jl[l] = nbr[(tail ? k + (gr_uint)l < e : 1) ? k + (gr_uint)l : e - 1];
   gr_load_block(p, jl, qx, qy, qz);
   for (l = 0; l < GR_LANES; ++l) {
     const int live = tail ? k + (gr_uint)l < e : 1;
-    const int j = jl[l];
+    const int j = (int)jl[l];
     const float dx = px - qx[l], dy = py - qy[l], dz = pz - qz[l];
     const float d2 = dx * dx + dy * dy + dz * dz;
     const float rsum = ri + (uniform ? ri : g->radius[j]);

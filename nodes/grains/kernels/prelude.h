@@ -83,7 +83,7 @@ GR_INLINE gr_uint gr_as_uint(float f) { return __builtin_bit_cast(gr_uint, f); }
 #include <immintrin.h>
 /* AVX2: one 4-float load per grain (reads a[3 j + 3]: a holds 3 n + 1 floats) and a transpose,
  * instead of three 8-lane gathers */
-GR_INLINE void gr_load_block(const float* a, const int* j, float* x, float* y, float* z) {
+GR_INLINE void gr_load_block(const float* a, const gr_uint* j, float* x, float* y, float* z) {
   __m256 r0 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[4]), _mm_loadu_ps(a + 3 * j[0]));
   __m256 r1 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[5]), _mm_loadu_ps(a + 3 * j[1]));
   __m256 r2 = _mm256_set_m128(_mm_loadu_ps(a + 3 * j[6]), _mm_loadu_ps(a + 3 * j[2]));
@@ -100,7 +100,7 @@ GR_INLINE void gr_load_block(const float* a, const int* j, float* x, float* y, f
   _mm256_storeu_ps(z, vz);
 }
 #else
-GR_INLINE void gr_load_block(const GR_GLOBAL float* a, const int* j, float* x, float* y, float* z) {
+GR_INLINE void gr_load_block(const GR_GLOBAL float* a, const gr_uint* j, float* x, float* y, float* z) {
   int l;
   for (l = 0; l < 8; ++l) {
     x[l] = a[3 * j[l]];

@@ -3,6 +3,6 @@
 #define GR_PORTABLE_LOADS
 #include "nodes/grains/kernels/prelude.h"
 
-void load_block_portable(const float* a, const int* j, float* x, float* y, float* z) {
+void load_block_portable(const float* a, const gr_uint* j, float* x, float* y, float* z) {
   gr_load_block(a, j, x, y, z);
 }

@@ -6,7 +6,7 @@
 
 #include "nodes/grains/kernels/prelude.h"
 
-void load_block_portable(const float* a, const int* j, float* x, float* y, float* z);
+void load_block_portable(const float* a, const gr_uint* j, float* x, float* y, float* z);
 
 TEST_CASE("the contact loop's block load reads the same positions on every path", "[grains]") {
   // n grains in 3 n + 1 floats (the solver's iterates), every float distinct, so a lane that
@@ -17,8 +17,8 @@ TEST_CASE("the contact loop's block load reads the same positions on every path"
   for (size_t k = 0; k < a.size(); ++k) a[k] = 0.5f + float(k);
   std::mt19937 rng(3);
   for (int block = 0; block < 200; ++block) {
-    int j[8];
-    for (int l = 0; l < 8; ++l) j[l] = int(rng() % n);
+    gr_uint j[8];
+    for (int l = 0; l < 8; ++l) j[l] = gr_uint(rng() % n);
     if (block == 0) j[0] = 0, j[7] = n - 1;
     if (block == 1) for (int l = 3; l < 8; ++l) j[l] = n - 1;
     float x[8], y[8], z[8], px[8], py[8], pz[8];

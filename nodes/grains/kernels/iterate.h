@@ -98,7 +98,12 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
       /* bounds read once: the stores below could otherwise alias them, and the loop would not
        * vectorise */
       const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
-      for (k = b; k < e; ++k)
+      /* in the contact loop's blocks of GR_LANES, the stores the scratch row was just written
+       * with: the compiler's loop read it 16 floats at a time from where the sums' alignment put
+       * it, so each load spanned two of those stores and waited for them to reach the cache */
+      for (k = b; k + GR_LANES <= e; k += GR_LANES)
+        gr_add_block(acc->pair + k, acc->pair_iteration + (k - b), share);
+      for (; k < e; ++k)
         acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
     }
     if (acc->collider && g->plane_offsets) {

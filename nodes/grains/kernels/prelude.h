@@ -99,7 +99,16 @@ GR_INLINE void gr_load_block(const float* a, const gr_uint* j, float* x, float* 
   _mm256_storeu_ps(y, vy);
   _mm256_storeu_ps(z, vz);
 }
+/* sum[0..7] += add[0..7] * s, sum as float bits (the friction pass's per-entry sums) */
+GR_INLINE void gr_add_block(gr_uint* sum, const float* add, float s) {
+  const __m256 v = _mm256_loadu_ps((const float*)sum);
+  _mm256_storeu_ps((float*)sum, _mm256_fmadd_ps(_mm256_loadu_ps(add), _mm256_set1_ps(s), v));
+}
 #else
+GR_INLINE void gr_add_block(GR_GLOBAL gr_uint* sum, const GR_GLOBAL float* add, float s) {
+  int l;
+  for (l = 0; l < 8; ++l) sum[l] = gr_as_uint(gr_as_float(sum[l]) + add[l] * s);
+}
 GR_INLINE void gr_load_block(const GR_GLOBAL float* a, const gr_uint* j, float* x, float* y, float* z) {
   int l;
   for (l = 0; l < 8; ++l) {

@@ -1,5 +1,6 @@
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -7,6 +8,7 @@
 #include "nodes/grains/kernels/prelude.h"
 
 void load_block_portable(const float* a, const gr_uint* j, float* x, float* y, float* z);
+void add_block_portable(gr_uint* sum, const float* add, float s);
 
 TEST_CASE("the contact loop's block load reads the same positions on every path", "[grains]") {
   // n grains in 3 n + 1 floats (the solver's iterates), every float distinct, so a lane that
@@ -32,6 +34,34 @@ TEST_CASE("the contact loop's block load reads the same positions on every path"
       CHECK(std::memcmp(&x[l], &px[l], sizeof(float)) == 0);
       CHECK(std::memcmp(&y[l], &py[l], sizeof(float)) == 0);
       CHECK(std::memcmp(&z[l], &pz[l], sizeof(float)) == 0);
+    }
+  }
+}
+
+TEST_CASE("the friction sums' block update adds the same bits on every path", "[grains]") {
+  // sums stored as float bits; distinct values per lane, so a lane moved or dropped cannot match.
+  // With FMA the update is one rounding, add * s + sum, as the compiler's loop had it.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1e-3f);
+  for (int block = 0; block < 200; ++block) {
+    gr_uint sum[8], ref[8], before[8];
+    float add[8];
+    const float s = 1.0f / float(1 + block % 31);
+    for (int l = 0; l < 8; ++l) {
+      sum[l] = ref[l] = before[l] = gr_as_uint(block == 0 ? 0.0f : u(rng));
+      add[l] = l == 3 ? 0.0f : u(rng);
+    }
+    gr_add_block(sum, add, s);
+    add_block_portable(ref, add, s);
+    for (int l = 0; l < 8; ++l) {
+      INFO("block " << block << " lane " << l);
+      CHECK(sum[l] == ref[l]);
+#if defined(__FMA__)
+      CHECK(gr_as_float(sum[l]) == std::fma(add[l], s, gr_as_float(before[l])));
+#else
+      CHECK(std::fabs(gr_as_float(sum[l]) - (gr_as_float(before[l]) + add[l] * s)) <=
+            1e-6f * std::fabs(gr_as_float(sum[l])));
+#endif
     }
   }
 }

@@ -91,11 +91,15 @@ inline uint64_t pair_key(double d2, uint32_t j) {
 // to about the K-th nearest are ranked. On the settled 100k pile the ranking had taken 8.6% of
 // the CPU (perf); cut first, ranking and cut take 2.2% and 4%, and 4 frames on one thread went
 // from 3.25-3.41 s to 3.06-3.22 s.
+// Lists of up to kCutMax keys are cut so: the cut also brings most lists longer than kRankMax
+// down to ranking size, where they had gone to nth_element and sort (a crushed 100k pile's lists
+// reach past 128 candidates, and the sort's insertion loops had taken a third of this function).
 constexpr uint32_t kRankMax = 128;
+constexpr uint32_t kCutMax = 1024;
 inline uint32_t finish_candidates(uint64_t* c, uint32_t m, int K) {
   const uint32_t keep = K > 0 ? std::min(m, uint32_t(K)) : m;
-  if (keep < m && m <= kRankMax) {
-    float d[kRankMax];
+  if (keep < m && m <= kCutMax) {
+    float d[kCutMax];
     float dmax = 0;
     for (uint32_t a = 0; a < m; ++a) {
       d[a] = std::bit_cast<float>(uint32_t(c[a] >> 32));

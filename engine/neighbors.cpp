@@ -289,6 +289,7 @@ struct ThreadScratch {
   std::vector<uint32_t> ranges;
   std::vector<uint32_t> handed;
   std::vector<uint32_t> list;  // the current chunk's kept lists
+  std::vector<uint32_t> orig;  // the original index of each gathered candidate
   size_t cap = 0, nhanded = 0;
 
   void reserve(size_t count) {
@@ -296,8 +297,9 @@ struct ThreadScratch {
     cap = std::max<size_t>({count, 2 * cap, 256});
     g.resize(4 * cap);
     slot.resize(cap);
+    orig.resize(cap);
     pass.resize(cap + 16);  // compaction stores whole 16-entry vectors
-    keys.resize(cap);
+    keys.resize(cap + 8);   // and whole 8-key vectors
   }
   void reserve_handed(size_t more) {
     if (nhanded + more > handed.size()) handed.resize(std::max(2 * handed.size(), nhanded + more));
@@ -405,11 +407,13 @@ struct Searcher {
     ts.reserve(count);
     float *gx = ts.g.data(), *gy = gx + ts.cap, *gz = gy + ts.cap, *gr = gz + ts.cap;
     uint32_t* gs = ts.slot.data();
+    uint32_t* go = ts.orig.data();
     uint32_t e = 0;
     for (size_t r = 0; r < ts.ranges.size(); r += 2)
       for (uint32_t s = ts.ranges[r]; s < ts.ranges[r + 1]; ++s, ++e) {
         gx[e] = X[s], gy[e] = Y[s], gz[e] = Z[s], gr[e] = R[s];
         gs[e] = s;
+        go[e] = order[s];
       }
     return e;
   }
@@ -423,6 +427,38 @@ struct Searcher {
     const float *gx = ts.g.data(), *gy = gx + ts.cap, *gz = gy + ts.cap, *gr = gz + ts.cap;
     const uint32_t* gs = ts.slot.data();
     int32_t* pass = ts.pass.data();
+    if (hand_from == uint32_t(-1)) {
+      // Nothing to hand over: every candidate takes the exact test in one loop the compiler
+      // vectorises, then the keys that pass are compacted. The float pre-test and a scalar
+      // exact test of its survivors had cost more than testing them all in vectors.
+      const uint32_t* go = ts.orig.data();
+      uint64_t* keys = ts.keys.data();
+      for (uint32_t e = 0; e < count; ++e) {
+        const double d2 = pair_dist2(px, py, pz, gx[e], gy[e], gz[e]);
+        pass[e] = pair_ok(d2, qs, pr, gr[e]) & (gs[e] != k);
+        keys[e] = pair_key(d2, go[e]);
+      }
+      uint32_t kept = 0;
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+      // in place, 8 at a time (kept <= e: a store never reaches a key not yet read); keys has
+      // 8 entries of slack for the last whole-vector store
+      for (uint32_t e = 0; e < count; e += 8) {
+        const __mmask8 live = count - e >= 8 ? __mmask8(0xFF) : __mmask8((1u << (count - e)) - 1);
+        const __m256i f = _mm256_maskz_loadu_epi32(live, pass + e);
+        const __mmask8 ok = _mm256_mask_test_epi32_mask(live, f, f);
+        const __m512i kv = _mm512_maskz_loadu_epi64(live, keys + e);
+        _mm512_storeu_si512(keys + kept, _mm512_maskz_compress_epi64(ok, kv));
+        kept += uint32_t(std::popcount(unsigned(ok)));
+      }
+#else
+      for (uint32_t e = 0; e < count; ++e) {
+        keys[kept] = keys[e];
+        kept += uint32_t(pass[e]);
+      }
+#endif
+      *found = kept;
+      return finish_candidates(keys, kept, K);
+    }
     if (!prefilter) {
       for (uint32_t e = 0; e < count; ++e) pass[e] = 1;
     } else if (uniform) {  // vectorised

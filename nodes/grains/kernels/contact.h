@@ -148,7 +148,7 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
  * the contact overlap seen this iteration with the k-th entry of i's neighbour row (0: none).
  * Most candidates are apart: they are rejected on the squared distance, before any square root,
  * division or attribute read. */
-GR_INLINE int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
+GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
                               int i, int with_friction, GR_GLOBAL float* overlap_out,
                               gr_float3* sum) {
   int count = 0;

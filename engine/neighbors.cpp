@@ -49,6 +49,8 @@
 #include <limits>
 #include <numeric>
 
+#include "engine/buffer.h"
+
 namespace grains {
 namespace {
 
@@ -607,15 +609,16 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
   // Keys, then a stable counting sort into cells (level-major, so every level is one slot range
   // and larger levels come later).
   if (buf.size() < n) buf.resize(n);
-  if (order_.size() < n) order_.resize(n);
-  if (scratch_.size() < 4 * n) scratch_.resize(4 * n);
+  resize_for_rewrite(order_, n);
+  resize_for_rewrite(scratch_, 4 * n);
   const size_t chunk = std::max<size_t>(64, (n + 16 * size_t(T) - 1) / (16 * size_t(T)));
   const size_t nchunks = (n + chunk - 1) / chunk;
   // cell_start_: cell starts | chunk list positions | found per slot | handed group starts
-  // | handed groups (sized once their total is known)
+  // | handed groups (sized once their total is known); the last two with levels only
   const size_t start_size = total_keys + 2, at_chunks = start_size, at_found = at_chunks + nchunks,
                at_groups = at_found + n, at_handed = at_groups + n + 2;
-  if (cell_start_.size() < at_handed) cell_start_.resize(at_handed);
+  const size_t start_need = multi ? at_handed : at_groups;
+  resize_for_rewrite(cell_start_, start_need);
   uint32_t* keys = buf.data();
 #pragma omp parallel for schedule(static) num_threads(T)
   for (ptrdiff_t i = 0; i < ptrdiff_t(n); ++i) {
@@ -784,7 +787,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
 #pragma omp single
     {
       for (size_t i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
-      out.indices.resize(offsets[n]);
+      resize_for_rewrite(out.indices, offsets[n]);
     }
 
     // 4. Each list to its place: a copy, or a merge with what was handed over (keys rebuilt
@@ -792,7 +795,7 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
     {
       const uint32_t* base = cell_start_.data();
       const uint32_t *cpos = base + at_chunks, *fnd = base + at_found, *gstart = base + at_groups,
-                     *groups = base + at_handed;
+                     *groups = multi ? base + at_handed : nullptr;
       uint32_t* dst = out.indices.data();
       const uint32_t* src = buf.data();
       // dynamic: the merges gather in the slots of the larger levels, at the end

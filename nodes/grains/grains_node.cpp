@@ -44,7 +44,6 @@ class GrainsNode : public Node {
     sort_by_cell(s, st, half_sep);
     gather3(s.v3("P"), P_);
     gather3(s.v3("v"), v_);
-    gather3(s.v3("force"), F_);
     gather1(s.f("mass"), mass_);
     gather1(s.f("pscale"), r_);
     for (float& r : r_)
@@ -53,7 +52,8 @@ class GrainsNode : public Node {
     d.n = n;
     d.P = P_.data();
     d.v = v_.data();
-    d.force = F_.data();
+    d.force = s.v3("force");  // read in place through idx_: a copy would cost 12 B a grain
+    d.force_index = idx_.data();
     d.mass = mass_.data();
     d.pscale = r_.data();
     d.friction = optional(s, "friction", friction_);
@@ -290,9 +290,8 @@ class GrainsNode : public Node {
     gather3(s.v3("P"), P_);
     std::vector<uint32_t> order =
         cell_sort_order(P_.data(), n, 2.0f * r_max * st.neighbor_query_scale);
-    sorted_.resize(n);
-    for (size_t k = 0; k < n; ++k) sorted_[k] = idx_[order[k]];
-    idx_.swap(sorted_);
+    for (size_t k = 0; k < n; ++k) order[k] = idx_[order[k]];
+    idx_.swap(order);
   }
 
   void gather3(const float* a, std::vector<float>& out) const {
@@ -312,8 +311,8 @@ class GrainsNode : public Node {
   }
 
   GrainsSolver solver_;
-  std::vector<uint32_t> idx_, sorted_;
-  std::vector<float> P_, v_, F_, mass_, r_, friction_, rw_, rs_, aw_, as_, shock_;
+  std::vector<uint32_t> idx_;
+  std::vector<float> P_, v_, mass_, r_, friction_, rw_, rs_, aw_, as_, shock_;
   // explicit constraints of the gathered grains: store primitive index, compact endpoints
   std::vector<int32_t> compact_, pairs_;
   std::vector<uint32_t> prims_;

@@ -37,6 +37,7 @@
 #include <cstring>
 #include <limits>
 
+#include "engine/buffer.h"
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/iterate.h"
 static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slots = planes");
@@ -463,8 +464,9 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
     offsets[i + 1] = static_cast<uint32_t>(nearest(i, dist, nrm, idx));
   }
   for (long i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
-  plane_.resize(9 * size_t(offsets[n]));
-  plane_collider_.resize(offsets[n]);
+  // the fall's wide ranges (|p - P| above) can make many more rows than a resting pile keeps
+  resize_for_rewrite(plane_, 9 * size_t(offsets[n]));
+  resize_for_rewrite(plane_collider_, offsets[n]);
   float* plane = plane_.data();
   int32_t* which = plane_collider_.data();
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -561,6 +563,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   g.P = P0_;
   g.v = d.v;
   g.force = d.force;
+  g.force_index = d.force_index;
   g.mass = mass_;
   g.radius = radius_;
   g.inv_mass = inv_mass_.data();

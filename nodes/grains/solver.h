@@ -90,7 +90,8 @@ struct GrainsData {
   size_t n = 0;
   float* P = nullptr;       // (n x 3) m, in: start of substep, out: end
   float* v = nullptr;       // (n x 3) m/s, in/out
-  const float* force = nullptr;  // (n x 3) N
+  const float* force = nullptr;  // (n x 3) N, or the caller's (points x 3) with force_index
+  const uint32_t* force_index = nullptr;  // (n) optional: grain i's force is force[force_index[i]]
   const float* mass = nullptr;   // (n) kg
   const float* pscale = nullptr;  // (n) m, radius
   const float* friction = nullptr;             // (n) optional

@@ -682,10 +682,6 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
     acc.collider_dx = collider_dx_.data();
   }
-  if (collider_friction_pass) {
-    collider_normal_.assign(GR_MAX_PLANES * n, 0.0f);
-    acc.collider = collider_normal_.data();
-  }
 
   // 2. neighbour candidates and collider planes from the predicted positions
   // assume_uniform_radius: one grid cell size and every grain searched as the largest one, a
@@ -750,12 +746,32 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     acc.pair = pair_normal_.data();
   };
   if (pairs_on) find_pairs(true);
-  if (colliders_on) {
-    find_planes(P0_, p_.data(), origin, colliders, collider_count,
-                s.neighbor_query_scale, threads);
+  // collider planes; the friction pass's sums are per plane entry, and a rebuild during the
+  // iterations carries each one to the same collider's entry in the grain's new row
+  auto planes = [&](bool first) {
+    if (!first && collider_friction_pass) {
+      prev_plane_offsets_.swap(plane_offsets_);
+      prev_plane_collider_.swap(plane_collider_);
+      prev_collider_normal_.swap(collider_normal_);
+    }
+    find_planes(P0_, p_.data(), origin, colliders, collider_count, s.neighbor_query_scale,
+                threads);
     g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
-  }
+    if (!collider_friction_pass) return;
+    collider_normal_.assign(plane_offsets_[n], 0.0f);
+    acc.collider = collider_normal_.data();
+    if (first) return;
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i)
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
+        for (uint32_t m = prev_plane_offsets_[i]; m < prev_plane_offsets_[i + 1]; ++m)
+          if (prev_plane_collider_[m] == plane_collider_[e]) {
+            collider_normal_[e] = prev_collider_normal_[m];
+            break;
+          }
+  };
+  if (colliders_on) planes(true);
 
   // 3. Jacobi iterations
   const int with_friction = s.accurate_friction ? 1 : 0;
@@ -764,13 +780,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
   for (int it = 0; it < iterations; ++it) {
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
-    if (it > 0 && colliders_on && s.update_collisions_during_iterations)
-    {
-      find_planes(P0_, p_.data(), origin, colliders, collider_count,
-                  s.neighbor_query_scale, threads);
-      g.plane_offsets = plane_offsets_.data();
-      g.plane = plane_.data();
-    }
+    if (it > 0 && colliders_on && s.update_collisions_during_iterations) planes(false);
     const float* p = p_.data();
     // Chebyshev: the result overwrites the iterate before p_, which only grain i reads, for i
     float* next = chebyshev ? p_before_.data() : p_next_.data();

@@ -171,7 +171,12 @@ class GrainsSolver {
   size_t row_length_ = 1;              // the longest neighbour row
   size_t row_stride_ = 1;              // floats between threads' rows in pair_normal_it_
   std::vector<uint32_t> row_kept_;     // (n) entries each row keeps, in drop_constrained_pairs
-  std::vector<float> collider_normal_;               // (n) m
+  // accumulated collider overlaps for the friction pass (no accurate friction), per plane entry
+  std::vector<float> collider_normal_;  // (plane entries) m
+  // the planes before a rebuild during the iterations, to carry those sums
+  std::vector<uint32_t> prev_plane_offsets_;
+  std::vector<int32_t> prev_plane_collider_;
+  std::vector<float> prev_collider_normal_;
   NeighborList prev_neighbors_;  // rows before a rebuild during the iterations, to carry sums
   std::vector<float> search_radius_;  // (n) m: the largest radius, with assume_uniform_radius
   // (n) m: the caller's pscale, or radius_copy_ = particle_separation / 2 when it has none

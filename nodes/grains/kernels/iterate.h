@@ -17,7 +17,7 @@ typedef struct {
   /* (neighbour entries) sum over iterations of overlap / n_i, as float bits: unsigned storage,
    * so that the solver can lend the same memory to the neighbour search between substeps */
   GR_GLOBAL gr_uint* pair;
-  GR_GLOBAL float* collider;       /* (n x GR_MAX_PLANES) the same for the collider planes */
+  GR_GLOBAL float* collider;       /* (plane entries) the same for the collider planes */
   /* (n x GR_MAX_PLANES x 3) m: each collider plane's share of i's applied corrections, summed
    * over the iterations (impact data and collision feedback), or null. The collider part of a
    * grain's corrections is split among its planes in proportion to their overlaps (exact for
@@ -107,8 +107,9 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
         acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
     }
     if (acc->collider && g->plane_offsets) {
-      int k;
-      for (k = 0; k < GR_MAX_PLANES; ++k) acc->collider[GR_MAX_PLANES * i + k] += pen[k] * share;
+      const gr_uint b = g->plane_offsets[i], e = g->plane_offsets[i + 1];
+      gr_uint k;
+      for (k = b; k < e; ++k) acc->collider[k] += pen[k - b] * share;
     }
   }
   return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_averaging);
@@ -122,13 +123,14 @@ GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
   int count = 0, ccount = 0;
   if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
   if (acc->collider && g->plane_offsets)
-    ccount = gr_gather_collider_friction(g, prm, p, acc->collider + GR_MAX_PLANES * i, i, &csum);
+    ccount = gr_gather_collider_friction(g, prm, p, acc->collider + g->plane_offsets[i], i, &csum);
   count += ccount;
   sum = gr_add(sum, csum);
   if (acc->collider_dx && ccount) {
     float w[GR_MAX_PLANES];
+    const gr_uint b = g->plane_offsets[i], e = g->plane_offsets[i + 1];
     int k;
-    for (k = 0; k < GR_MAX_PLANES; ++k) w[k] = acc->collider[GR_MAX_PLANES * i + k];
+    for (k = 0; k < GR_MAX_PLANES; ++k) w[k] = b + (gr_uint)k < e ? acc->collider[b + k] : 0.0f;
     gr_add_collider_dx(acc->collider_dx, i, csum, gr_average_factor(count, 1.0f, prm->disable_averaging), w);
   }
   return gr_average(gr_load3(p, i), sum, count, 1.0f, prm->disable_averaging);

@@ -863,8 +863,56 @@ inline uint64_t spread3(uint64_t v) {
 }
 }  // namespace
 
+namespace {
+
+// Stable LSD radix sort of order by code (codes of 3 * bits bits), 11 bits a pass.
+template <class Code>
+void radix_sort_by_code(std::vector<Code>& code, std::vector<uint32_t>& order, int bits) {
+  const size_t n = code.size();
+  std::vector<Code> code2(n);
+  std::vector<uint32_t> order2(n);
+  constexpr int kDigit = 11;
+  std::vector<uint32_t> hist(size_t(1) << kDigit);
+  for (int shift = 0; shift < 3 * bits; shift += kDigit) {
+    std::fill(hist.begin(), hist.end(), 0u);
+    const Code mask = (Code(1) << kDigit) - 1;
+    for (size_t i = 0; i < n; ++i) ++hist[(code[i] >> shift) & mask];
+    uint32_t sum = 0;
+    for (auto& h : hist) {
+      const uint32_t c = h;
+      h = sum;
+      sum += c;
+    }
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t d = hist[(code[i] >> shift) & mask]++;
+      code2[d] = code[i];
+      order2[d] = order[i];
+    }
+    code.swap(code2);
+    order.swap(order2);
+  }
+}
+
+template <class Code>
+void sort_by_morton(const float* P, const double* lo, const int64_t* ext, double inv, int bits,
+                    std::vector<uint32_t>& order) {
+  const size_t n = order.size();
+  std::vector<Code> code(n);
+#pragma omp parallel for schedule(static)
+  for (ptrdiff_t i = 0; i < ptrdiff_t(n); ++i) {
+    uint64_t c = 0;
+    for (int a = 0; a < 3; ++a)
+      c |= spread3(uint64_t(cell_coord((double(P[3 * i + a]) - lo[a]) * inv, ext[a]))) << a;
+    code[i] = Code(c);
+  }
+  radix_sort_by_code(code, order, bits);
+}
+
+}  // namespace
+
 // Morton code of each point's cell (21 bits per axis: a grid wider than 2^21 cells clamps its far
-// cells onto the last one, which still gives a permutation), then a stable LSD radix sort.
+// cells onto the last one, which still gives a permutation), then a stable LSD radix sort, on
+// 32-bit codes when they fit (grids up to 1024 cells a side: half the sort's memory).
 std::vector<uint32_t> cell_sort_order(const float* P, size_t n, float cell) {
   std::vector<uint32_t> order(n);
   std::iota(order.begin(), order.end(), 0u);
@@ -886,37 +934,12 @@ std::vector<uint32_t> cell_sort_order(const float* P, size_t n, float cell) {
   const int64_t widest = std::max({ext[0], ext[1], ext[2]});
   const int bits = int(std::bit_width(uint64_t(widest - 1)));
   if (bits == 0) return order;
-  std::vector<uint64_t> code(n), code2(n);
+  // stable: equal codes keep increasing index
   const double inv = 1.0 / double(cell);
-#pragma omp parallel for schedule(static)
-  for (ptrdiff_t i = 0; i < ptrdiff_t(n); ++i) {
-    uint64_t c = 0;
-    for (int a = 0; a < 3; ++a)
-      c |= spread3(uint64_t(cell_coord((double(P[3 * i + a]) - lo[a]) * inv, ext[a]))) << a;
-    code[i] = c;
-  }
-  // LSD radix sort: stable, so equal codes keep increasing index.
-  std::vector<uint32_t> order2(n);
-  constexpr int kDigit = 11;
-  std::vector<uint32_t> hist(size_t(1) << kDigit);
-  for (int shift = 0; shift < 3 * bits; shift += kDigit) {
-    std::fill(hist.begin(), hist.end(), 0u);
-    const uint64_t mask = (uint64_t(1) << kDigit) - 1;
-    for (size_t i = 0; i < n; ++i) ++hist[(code[i] >> shift) & mask];
-    uint32_t sum = 0;
-    for (auto& h : hist) {
-      const uint32_t c = h;
-      h = sum;
-      sum += c;
-    }
-    for (size_t i = 0; i < n; ++i) {
-      const uint32_t d = hist[(code[i] >> shift) & mask]++;
-      code2[d] = code[i];
-      order2[d] = order[i];
-    }
-    code.swap(code2);
-    order.swap(order2);
-  }
+  if (3 * bits <= 32)
+    sort_by_morton<uint32_t>(P, lo, ext, inv, bits, order);
+  else
+    sort_by_morton<uint64_t>(P, lo, ext, inv, bits, order);
   return order;
 }
 

@@ -1,9 +1,6 @@
 #include "engine/simulation.h"
 
 #include <omp.h>
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
 
 #include <algorithm>
 #include <cmath>
@@ -195,13 +192,6 @@ void Simulation::step_frame() {
     o->stats.wall_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
   }
   ++frame_;
-#if defined(__GLIBC__)
-  // Give the frame's freed transients (the statistics' grid, the cell sort's arrays) back to the
-  // system. glibc keeps up to twice its largest freed block at the top of its heap once it has
-  // freed a large one, so they stayed resident under the next frame's peak: 39 B a grain of the
-  // settle_100k pile's 547.
-  malloc_trim(0);
-#endif
 }
 
 namespace {

@@ -135,6 +135,16 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
     else
       gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, out, uniform, 1);
   }
+#ifdef GR_HAVE_SUM_LANES
+  {
+    float s[4];
+    gr_sum_lanes(lx, ly, lz, lc, s);
+    sum->x += s[0];
+    sum->y += s[1];
+    sum->z += s[2];
+    return (int)s[3];
+  }
+#else
   {
     float sx = 0.0f, sy = 0.0f, sz = 0.0f, count = 0.0f;
     for (l = 0; l < GR_LANES; ++l) {
@@ -148,6 +158,7 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
     sum->z += sz;
     return (int)count;
   }
+#endif
 }
 
 /* One Jacobi iteration's pair corrections of grain i (contacts, with friction when

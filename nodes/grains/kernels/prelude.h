@@ -99,6 +99,34 @@ GR_INLINE void gr_load_block(const float* a, const gr_uint* j, float* x, float* 
   _mm256_storeu_ps(y, vy);
   _mm256_storeu_ps(z, vz);
 }
+/* (x, y, z, c) += the lanes of x[0..7], y, z, c, added lane after lane from lane 0 (the order
+ * the portable loop adds them in, so the sums are the same floats): a transpose gives each lane's
+ * four values as one vector, then eight vector adds (the scalar loop had reloaded the 32 values
+ * from the stack one by one) */
+#define GR_HAVE_SUM_LANES 1
+GR_INLINE void gr_sum_lanes(const float* x, const float* y, const float* z, const float* c,
+                            float* out) {
+  const __m256 vx = _mm256_loadu_ps(x), vy = _mm256_loadu_ps(y), vz = _mm256_loadu_ps(z),
+               vc = _mm256_loadu_ps(c);
+  const __m256 t0 = _mm256_unpacklo_ps(vx, vy); /* x0 y0 x1 y1 | x4 y4 x5 y5 */
+  const __m256 t1 = _mm256_unpackhi_ps(vx, vy); /* x2 y2 x3 y3 | x6 y6 x7 y7 */
+  const __m256 t2 = _mm256_unpacklo_ps(vz, vc); /* z0 c0 z1 c1 | z4 c4 z5 c5 */
+  const __m256 t3 = _mm256_unpackhi_ps(vz, vc); /* z2 c2 z3 c3 | z6 c6 z7 c7 */
+  const __m256 l04 = _mm256_shuffle_ps(t0, t2, 0x44); /* lane 0 | lane 4 */
+  const __m256 l15 = _mm256_shuffle_ps(t0, t2, 0xEE); /* lane 1 | lane 5 */
+  const __m256 l26 = _mm256_shuffle_ps(t1, t3, 0x44); /* lane 2 | lane 6 */
+  const __m256 l37 = _mm256_shuffle_ps(t1, t3, 0xEE); /* lane 3 | lane 7 */
+  __m128 s = _mm_setzero_ps();
+  s = _mm_add_ps(s, _mm256_castps256_ps128(l04));
+  s = _mm_add_ps(s, _mm256_castps256_ps128(l15));
+  s = _mm_add_ps(s, _mm256_castps256_ps128(l26));
+  s = _mm_add_ps(s, _mm256_castps256_ps128(l37));
+  s = _mm_add_ps(s, _mm256_extractf128_ps(l04, 1));
+  s = _mm_add_ps(s, _mm256_extractf128_ps(l15, 1));
+  s = _mm_add_ps(s, _mm256_extractf128_ps(l26, 1));
+  s = _mm_add_ps(s, _mm256_extractf128_ps(l37, 1));
+  _mm_storeu_ps(out, s);
+}
 /* sum[0..7] += add[0..7] * s, sum as float bits (the friction pass's per-entry sums) */
 GR_INLINE void gr_add_block(gr_uint* sum, const float* add, float s) {
   const __m256 v = _mm256_loadu_ps((const float*)sum);

@@ -711,13 +711,15 @@ void write_markdown(const std::vector<std::vector<BenchRow>>& scenes, const Benc
          << fmt("%.3g", r.max_strain) << " | " << fmt("%+.3g", r.energy_drift) << " | "
          << si(r.ci_per_s()) << " |\n";
   }
-  // the features section belongs to `grains bench --features`: carry it over unchanged
+  // the hand-written notes, and the features section that belongs to `grains bench
+  // --features`: carried over unchanged
   if (fs::exists(path)) {
     std::ifstream in(path);
     std::ostringstream old;
     old << in.rdbuf();
-    std::string section = features_section_of(old.str());
-    if (!section.empty()) md << "\n" << section;
+    for (const std::string& section :
+         {marked_section_of(old.str(), kNotesBegin, kNotesEnd), features_section_of(old.str())})
+      if (!section.empty()) md << "\n" << section;
   }
   fs::path p(path);
   if (p.has_parent_path()) fs::create_directories(p.parent_path());

@@ -76,17 +76,22 @@ void write_features_csv(const std::vector<FeatureRow>& rows, const std::string& 
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
-// [begin, end) of the features section in `md`, its end line's newline included; false when it
-// has none. The section ends at the first end marker and starts at the last begin marker before
-// it, so a stray begin marker never makes it swallow the text that follows.
-bool find_features_section(const std::string& md, size_t& begin, size_t& end) {
-  end = md.find(kFeaturesEnd);
+// [begin, end) of the section between the markers in `md`, its end line's newline included;
+// false when it has none. The section ends at the first end marker and starts at the last begin
+// marker before it, so a stray begin marker never makes it swallow the text that follows.
+bool find_marked_section(const std::string& md, const char* begin_marker, const char* end_marker,
+                         size_t& begin, size_t& end) {
+  end = md.find(end_marker);
   if (end == std::string::npos) return false;
-  begin = md.rfind(kFeaturesBegin, end);
+  begin = md.rfind(begin_marker, end);
   if (begin == std::string::npos) return false;
-  end += std::string(kFeaturesEnd).size();
+  end += std::string(end_marker).size();
   if (end < md.size() && md[end] == '\n') ++end;
   return true;
+}
+
+bool find_features_section(const std::string& md, size_t& begin, size_t& end) {
+  return find_marked_section(md, kFeaturesBegin, kFeaturesEnd, begin, end);
 }
 
 std::string features_markdown(const std::vector<FeatureRow>& rows, const BenchOptions& o,
@@ -172,12 +177,16 @@ const char* features_csv_header() {
          "mean_penetration,moved_radii,compared";
 }
 
-std::string features_section_of(const std::string& md) {
+std::string marked_section_of(const std::string& md, const char* begin, const char* end) {
   size_t b = 0, e = 0;
-  if (!find_features_section(md, b, e)) return "";
+  if (!find_marked_section(md, begin, end, b, e)) return "";
   std::string s = md.substr(b, e - b);
   if (s.back() != '\n') s += '\n';
   return s;
+}
+
+std::string features_section_of(const std::string& md) {
+  return marked_section_of(md, kFeaturesBegin, kFeaturesEnd);
 }
 
 std::string splice_features_section(const std::string& md, const std::string& section) {

@@ -37,8 +37,16 @@ const char* features_csv_header();
 inline constexpr const char* kFeaturesBegin = "<!-- features:begin -->";
 inline constexpr const char* kFeaturesEnd = "<!-- features:end -->";
 
-// The features section of a report (markers included, with its final newline), or "" when `md`
-// has none (or only one of the markers).
+// Hand-written notes in the report (what a sweep cannot measure, e.g. the contact-loop floor of
+// bench/contact_bound.cpp) sit between these lines; `grains bench` carries them over unchanged.
+inline constexpr const char* kNotesBegin = "<!-- notes:begin -->";
+inline constexpr const char* kNotesEnd = "<!-- notes:end -->";
+
+// The section of `md` between the markers `begin` and `end` (markers included, with its final
+// newline), or "" when `md` has none (or only one of the markers). The section ends at the first
+// end marker and starts at the last begin marker before it.
+std::string marked_section_of(const std::string& md, const char* begin, const char* end);
+// The features section of a report: marked_section_of(md, kFeaturesBegin, kFeaturesEnd).
 std::string features_section_of(const std::string& md);
 // `md` with its features section replaced by `section` (which carries its own markers), or with
 // `section` appended after a blank line when `md` has none.

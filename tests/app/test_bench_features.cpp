@@ -105,7 +105,10 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
   for (auto& e : fs::directory_iterator(dir))
     CHECK(e.path().filename().string().rfind(".run_", 0) != 0);
 
-  SECTION("the sweep regenerates the report around the features section") {
+  SECTION("the sweep regenerates the report around the notes and the features section") {
+    const std::string notes =
+        std::string(kNotesBegin) + "\n## Notes\n\nhand-written\n" + kNotesEnd + "\n";
+    write_file(dir, "B.md", report + "\n" + notes);
     REQUIRE(run_grains(
                 "bench " + tiny_scene() + " --quick --threads 1 --out " + dir + "/sweep --md " + md,
                 dir + "/log2") == 0);
@@ -113,6 +116,8 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
     CHECK_THAT(swept, Catch::StartsWith("# Benchmarks"));
     CHECK_THAT(swept, Catch::Contains("## bench_tiny"));
     CHECK(features_section_of(swept) == features_section_of(report));
+    CHECK(marked_section_of(swept, kNotesBegin, kNotesEnd) == notes);
+    CHECK(swept.find(notes) < swept.find(kFeaturesBegin));
   }
   SECTION("--only runs those features between the baselines and replaces the section") {
     REQUIRE(run_grains("bench --features " + tiny_scene() + " --only clumping,max_neighbors_16 " +

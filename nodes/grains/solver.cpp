@@ -746,30 +746,45 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     acc.pair = pair_normal_.data();
   };
   if (pairs_on) find_pairs(true);
-  // collider planes; the friction pass's sums are per plane entry, and a rebuild during the
-  // iterations carries each one to the same collider's entry in the grain's new row
+  // collider planes. What the iterations accumulate per plane follows its collider through a
+  // rebuild during the iterations, not its place in the nearest-first row (two planes swap when
+  // the iterations push a grain nearer the second): the friction pass's sums, per plane entry,
+  // and the impact data's applied corrections, per slot. A collider the rebuilt row no longer
+  // holds takes its sums with it.
   auto planes = [&](bool first) {
-    if (!first && collider_friction_pass) {
+    const bool carry = !first && (collider_friction_pass || impacts);
+    if (carry) {
       prev_plane_offsets_.swap(plane_offsets_);
       prev_plane_collider_.swap(plane_collider_);
-      prev_collider_normal_.swap(collider_normal_);
+      if (collider_friction_pass) prev_collider_normal_.swap(collider_normal_);
     }
     find_planes(P0_, p_.data(), origin, colliders, collider_count, s.neighbor_query_scale,
                 threads);
     g.plane_offsets = plane_offsets_.data();
     g.plane = plane_.data();
-    if (!collider_friction_pass) return;
-    collider_normal_.assign(plane_offsets_[n], 0.0f);
-    acc.collider = collider_normal_.data();
-    if (first) return;
+    if (collider_friction_pass) {
+      collider_normal_.assign(plane_offsets_[n], 0.0f);
+      acc.collider = collider_normal_.data();
+    }
+    if (!carry) return;
 #pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i)
-      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
-        for (uint32_t m = prev_plane_offsets_[i]; m < prev_plane_offsets_[i + 1]; ++m)
-          if (prev_plane_collider_[m] == plane_collider_[e]) {
-            collider_normal_[e] = prev_collider_normal_[m];
-            break;
-          }
+    for (long i = 0; i < ln; ++i) {
+      constexpr int K = GR_MAX_PLANES;
+      float dx[3 * K];
+      float* slots = impacts ? collider_dx_.data() + 3 * K * i : nullptr;
+      if (slots) {
+        std::copy(slots, slots + 3 * K, dx);
+        std::fill(slots, slots + 3 * K, 0.0f);
+      }
+      const uint32_t b = plane_offsets_[i], pb = prev_plane_offsets_[i];
+      for (uint32_t e = b; e < plane_offsets_[i + 1]; ++e)
+        for (uint32_t m = pb; m < prev_plane_offsets_[i + 1]; ++m) {
+          if (prev_plane_collider_[m] != plane_collider_[e]) continue;
+          if (collider_friction_pass) collider_normal_[e] = prev_collider_normal_[m];
+          if (slots) std::copy(dx + 3 * (m - pb), dx + 3 * (m - pb + 1), slots + 3 * (e - b));
+          break;
+        }
+    }
   };
   if (colliders_on) planes(true);
 

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/support.h"
@@ -118,4 +120,79 @@ TEST_CASE("impact data: a dropped grain's impact impulses sum to its momentum ch
   CHECK(first_hit > 8);   // free fall from 0.95 m takes 0.44 s = 10.5 frames
   CHECK(first_hit < 13);
   CHECK(std::fabs(J - expected) < 0.02 * expected);
+}
+
+TEST_CASE("impact data: a plane row rebuilt during the iterations keeps each collider's impulse",
+          "[grains][impacts][colliders]") {
+  // Grain A (r = 5 cm, 1 kg) sits in the corner of the ground and a wall (face x = 0), 2 cm into
+  // the ground and 1 cm into the wall, so its plane row, nearest first, is (ground, wall). Grain
+  // B, 20 times heavier, overlaps it by 3 cm from -x and keeps pushing it into the wall, so from
+  // the first iteration on A is nearer the wall and a row rebuilt then is (wall, ground). A slides
+  // along z at 1 m/s, so the friction pass acts on both planes. The rebuilt rows hold the same
+  // two infinite planes as the row found once, so the grains move the same up to float rounding,
+  // and so must each collider's impulse: the iterations' applied corrections and the friction
+  // pass's overlap sums follow their collider through a rebuild, not their slot in the row.
+  // Tolerance: 1e-4 of the largest impulse component, against float rounding of ~1e-6; a sum
+  // left in its slot gives the ground the wall's share, a difference of order 1.
+  struct Result {
+    Vec3 a, j_ground, j_wall;
+    int32_t first_slot = -2;
+  };
+  auto run = [](bool update) {
+    GrainsSettings s = settings(24, 1, 10);
+    s.update_collisions_during_iterations = update;
+    s.final_collision_test = false;
+    s.accurate_friction = false;
+    s.friction_with_colliders = 1.0f;
+    s.friction_with_particles = 0;
+    Scene sc;
+    sc.s = s;
+    sc.gravity = {0, 0, 0};
+    sc.add_collider(ground());
+    sc.add_collider(box({0.5f, 0, 0}, {1, 2, 2}));  // wall face at x = 0
+    sc.add({-0.04f, 0.03f, 0}, 0.05f, 1.0f, {0, 0, 1});
+    sc.add({-0.11f, 0.03f, 0}, 0.05f, 20.0f, {0, 0, 1});
+    for (ColliderState& c : sc.colliders) c.dt = s.dt;
+    const size_t slots = GrainsSolver::kContactSlots * sc.size();
+    std::vector<float> impulse(3 * slots), point(3 * slots), normal(3 * slots);
+    std::vector<int32_t> collider(slots);
+    GrainsData d = sc.data();
+    d.impact_impulse = impulse.data();
+    d.impact_point = point.data();
+    d.impact_normal = normal.data();
+    d.impact_collider = collider.data();
+    sc.solver.substep(d, s, sc.colliders.data(), sc.colliders.size(), &sc.stats);
+    Result r;
+    r.a = sc.pos(0);
+    r.first_slot = collider[0];
+    for (size_t q = 0; q < GrainsSolver::kContactSlots; ++q) {
+      Vec3 j = load3(impulse.data(), q);
+      if (collider[q] == 0) r.j_ground += j;
+      if (collider[q] == 1) r.j_wall += j;
+    }
+    return r;
+  };
+  Result once = run(false), every = run(true);
+  auto report3 = [](const std::string& what, const Vec3& j) {
+    report((what + " x").c_str(), j.x);
+    report((what + " y").c_str(), j.y);
+    report((what + " z").c_str(), j.z);
+  };
+  report3("impulse, rows found once: ground", once.j_ground);
+  report3("impulse, rows found once: wall", once.j_wall);
+  report3("impulse, rows rebuilt: ground", every.j_ground);
+  report3("impulse, rows rebuilt: wall", every.j_wall);
+  // the premise: the rebuilt row ends wall first, the row found once ground first
+  REQUIRE(once.first_slot == 0);
+  REQUIRE(every.first_slot == 1);
+  // both planes gave momentum, along their normals and against the sliding (friction)
+  CHECK(once.j_ground.y > 0);
+  CHECK(once.j_wall.x < 0);
+  CHECK(once.j_ground.z < 0);
+  CHECK(once.j_wall.z < 0);
+  CHECK(length(every.a - once.a) < 1e-5f);
+  float scale = std::max({std::fabs(once.j_ground.x), std::fabs(once.j_ground.y), std::fabs(once.j_ground.z),
+                          std::fabs(once.j_wall.x), std::fabs(once.j_wall.y), std::fabs(once.j_wall.z)});
+  CHECK(length(every.j_ground - once.j_ground) < 1e-4f * scale);
+  CHECK(length(every.j_wall - once.j_wall) < 1e-4f * scale);
 }

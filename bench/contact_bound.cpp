@@ -281,11 +281,11 @@ int main(int argc, char** argv) {
   };
   std::printf("%d x %d iterations on %d threads, particle-iterations per second:\n", o.repeat,
               o.iterations, threads);
-  std::printf("  engine, with sums  %.1f M\n", time_loop(0) / 1e6);
-  std::printf("  engine, no sums    %.1f M\n", time_loop(1) / 1e6);
+  std::printf("  engine, with sums  %.3g M\n", time_loop(0) / 1e6);
+  std::printf("  engine, no sums    %.3g M\n", time_loop(1) / 1e6);
 #if defined(__AVX512F__)
   if (longest <= 64)
-    std::printf("  ideal, with sums   %.1f M\n", time_loop(2) / 1e6);
+    std::printf("  ideal, with sums   %.3g M\n", time_loop(2) / 1e6);
   else
     std::printf("  ideal, with sums   (rows of at most 64 only)\n");
 #else

@@ -390,7 +390,9 @@ BenchSetting parse_setting(const nlohmann::json& j, const std::string& file, con
 }
 
 std::vector<Override> setting_overrides(const BenchSetting& s) {
+  // a sweep times fixed settings: error control would pick its own substeps
   return {Override{"solver", "substeps", std::to_string(s.substeps)},
+          Override{"solver", "error_control", "0"},
           Override{"grains", "constraint_iterations", std::to_string(s.iterations)}};
 }
 

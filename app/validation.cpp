@@ -41,6 +41,8 @@ std::vector<Override> common_overrides(const LawSettings& s, const std::string& 
   return {parse_override(source + ".separation=" + num(s.d, 9)),
           parse_override("grains.particle_separation=" + num(s.d, 9)),
           parse_override("solver.substeps=" + std::to_string(s.substeps)),
+          // the plan's settings are fixed: error control would pick its own substeps
+          parse_override("solver.error_control=0"),
           parse_override("grains.constraint_iterations=" + std::to_string(s.iterations)),
           parse_override("grains.friction_with_particles=" + num(s.friction, 9))};
 }

@@ -248,7 +248,7 @@ int main(int argc, char** argv) {
         float* nx = next.data();
 #pragma omp parallel num_threads(threads)
         {
-          gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr};
+          gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr, nullptr};
           if (variant == 0) {
             acc.pair_iteration = scratch.data() + row_stride * size_t(omp_get_thread_num());
             acc.pair = sums.data();
@@ -265,7 +265,7 @@ int main(int argc, char** argv) {
             }
             gr_float3 x;
             if (variant == 0) {
-              x = gr_iterate(&g, &prm, pp, ii, 0, &acc);
+              x = gr_iterate(&g, &prm, pp, ii, &acc);
             } else {
               gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
               const int count = gr_gather_contacts_lanes(&g, pp, ii, repulse, nullptr, &sum, 1);

@@ -27,7 +27,7 @@ void cook_node(const std::string& type,
   json solver = {{"name", "solver"},
                  {"type", "solver"},
                  {"inputs", {"node"}},
-                 {"params", {{"substeps", opt.substeps}}}};
+                 {"params", {{"substeps", opt.substeps}, {"error_control", opt.error_control}}}};
   json nodes = json::array({node, solver});
   if (opt.ground) {
     nodes.push_back({{"name", "ground"},

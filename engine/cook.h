@@ -13,6 +13,7 @@ namespace grains {
 
 struct CookOptions {
   int substeps = 1;
+  bool error_control = false;  // off: exactly `substeps` substeps a frame, like a fixed solver
   int frames = 1;
   double fps = 24;
   bool ground = false;  // add a ground plane collider at ground_y

@@ -17,7 +17,9 @@ namespace grains {
 // What the evaluator knows of the current moment.
 struct TimeInfo {
   double fps = 24;
-  int substeps = 1;
+  int substeps = 1;       // substeps this frame is being split into now (error control may raise it)
+  int base_substeps = 1;  // the solver's `substeps` parameter: stiffness fractions count these
+  bool stabilize = false;  // the first substep after error control refined the step
   int frame = 1;      // 1-based frame being computed (ends at time frame / fps)
   int substep = 0;    // 0-based substep within the frame
   double dt = 0;      // substep length (s)
@@ -54,6 +56,9 @@ struct CookContext {
   // The variables `params` were evaluated with (start of the substep), so a node can evaluate a
   // copy of its parameters at another moment (the target node poses at the substep's end).
   const ExprVars* vars = nullptr;
+  // Error control (solver `error_control`): a grains node raises this to the substep's error,
+  // the mean overlap of its touching grains over their summed radii. Null when off.
+  float* substep_error = nullptr;
 };
 
 class Node {
@@ -75,6 +80,9 @@ struct NodeTypeInfo {
   std::string type;
   std::string doc;
   NodeRole role = NodeRole::Pop;
+  // reports a substep error (CookContext::substep_error): a solver's error control acts only on
+  // chains holding such a node
+  bool reports_error = false;
   std::vector<ParamDecl> params;
   std::function<std::unique_ptr<Node>()> make;
   // Colliders only: the shape and pose for evaluated parameters.

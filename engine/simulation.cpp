@@ -113,25 +113,96 @@ void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
   obj.colliders_posed = true;
 }
 
+namespace {
+
+// The fewest substeps of a frame (fps) in which no point moves more than half its radius in a
+// substep, |v| dt + |a| dt^2 <= r / 2 (a = force / mass, the last substep's): the motion the
+// neighbour candidates (1.5 x the summed radii) and the contacts can follow. Only grains count
+// (ispbd 1 after the last substep): the solver sweeps its other points through the whole step.
+// Points without a radius are skipped; the answer is capped at `most`.
+int motion_substeps(const ParticleStore& pts, double fps, int most) {
+  const float* P = pts.v3_if("P");
+  const float* v = pts.v3_if("v");
+  const float* F = pts.v3_if("force");
+  const float* m = pts.f_if("mass");
+  const float* r = pts.f_if("pscale");
+  const int32_t* pbd = pts.i_if("ispbd");
+  if (!P || !v || !r || !pbd) return 1;
+  double worst = 1;
+  for (size_t k = 0; k < pts.size(); ++k) {
+    const double half = 0.5 * r[k];
+    if (!pbd[k] || !(half > 0)) continue;
+    const double speed = length(load3(v, k));
+    const double acc = F && m && m[k] > 0 ? length(load3(F, k)) / m[k] : 0.0;
+    // the S with speed / (fps S) + acc / (fps S)^2 = half: the positive root in 1 / (fps S)
+    const double x = acc > 0 ? (-speed + std::sqrt(speed * speed + 4 * acc * half)) / (2 * acc)
+                             : (speed > 0 ? half / speed : 0.0);
+    if (!(x > 0) || !std::isfinite(x)) continue;
+    worst = std::max(worst, 1.0 / (fps * x));
+  }
+  return static_cast<int>(std::min<double>(most, std::ceil(worst)));
+}
+
+// base x the power of two that reaches at least `need`, at most `most`
+int refine_to(int base, int need, int most) {
+  int s = base;
+  while (s < need && 2 * s <= most) s *= 2;
+  return s;
+}
+
+}  // namespace
+
+// Error control (solver `error_control`, DESIGN §3): a frame starts with the count the last one
+// ended with; after each substep the grains nodes report its error (CookContext::substep_error),
+// and a substep whose error e is over `error_tolerance` multiplies the count by the power of two
+// f with f^2 >= e / tolerance (the error falls about as dt^2), up to `max_substeps`, for the rest
+// of the frame and the next ones (substep s of S continues as substep f (s + 1) of f S: the same
+// moment, a finer step; its first substep stabilizes: TimeInfo::stabilize). The count also never
+// falls below what the grains' motion needs
+// (motion_substeps). The first frame starts at `max_substeps`.
+// A frame whose every substep stayed under a fifth of the tolerance lets the next frame start
+// with half as many, down to `substeps`: the overlap a substep leaves grows about as dt^2, so
+// halving the step count quadruples it, and a fifth leaves a margin. Counts are `substeps` times
+// a power of two. Everything here depends only on the state, so the counts, like the frames, are
+// the same for any thread count.
 void Simulation::step_object(SimObject& obj) {
-  const NodeDesc& solver = graph_.nodes[obj.solver];
   ChainNode& solver_entry = obj.chain.back();
   solver_entry.params.evaluate(vars_for(obj, obj.solver, frame_ / graph_.fps));
-  int substeps = std::max(1, solver_entry.params.i("substeps"));
-  (void)solver;
+  const ParamSet& sp = solver_entry.params;
+  const int base = std::max(1, sp.i("substeps"));
+  bool control = sp.b("error_control");
+  if (control) {  // only chains with a node that reports its error (a grains node)
+    bool reports = false;
+    for (const auto& c : obj.chain) reports = reports || graph_.nodes[c.node].info->reports_error;
+    control = reports;
+  }
+  const int most = std::max(base, sp.i("max_substeps"));
+  const float tolerance = static_cast<float>(sp.f("error_tolerance"));
+  // the first frame starts as fine as allowed: before the chain has run nothing is known of the
+  // grains' loads, and a first substep as long as a frame can crush a column by several radii
+  if (control && obj.substeps == 0) obj.substeps = refine_to(base, most, most);
+  int substeps = base;
+  if (control) substeps = refine_to(base, std::max(obj.substeps, motion_substeps(obj.pts, graph_.fps, most)), most);
+  bool refined = control && substeps > obj.substeps;
 
   TimeInfo time;
   time.fps = graph_.fps;
-  time.substeps = substeps;
+  time.base_substeps = base;
   time.frame = frame_ + 1;
-  time.dt = 1.0 / (graph_.fps * substeps);
   std::vector<uint32_t> members;
   obj.feedback.assign(obj.collider_nodes.size(), ColliderFeedback{});
   obj.feedback_on = false;
+  float frame_error = 0;
+  int taken = 0;
 
   for (int s = 0; s < substeps; ++s) {
+    time.substeps = substeps;
+    time.stabilize = refined;
+    refined = false;
     time.substep = s;
+    time.dt = 1.0 / (graph_.fps * substeps);
     time.st = frame_ / graph_.fps + s * time.dt;
+    float substep_error = 0;
     ParticleStore& pts = obj.pts;
     std::fill(pts.v3("force"), pts.v3("force") + 3 * pts.size(), 0.0f);
     std::fill(pts.i("ispbd"), pts.i("ispbd") + pts.size(), 0);
@@ -168,11 +239,31 @@ void Simulation::step_object(SimObject& obj) {
                       graph_.base_dir,
                       &obj.feedback,
                       &obj.feedback_on,
-                      &vars};
+                      &vars,
+                      control ? &substep_error : nullptr};
       c.impl->cook(ctx);
     }
+    ++taken;
+    frame_error = std::max(frame_error, substep_error);
+    if (control && s + 1 < substeps) {
+      // the error falls about as dt^2: refine by the power of two whose square covers it, and
+      // at least as far as the grains' motion asks
+      int factor = 1;
+      const int need = motion_substeps(pts, graph_.fps, most);
+      while (substeps * factor * 2 <= most &&
+             (static_cast<double>(factor) * factor * tolerance < substep_error ||
+              substeps * factor < need))
+        factor *= 2;
+      s = factor * (s + 1) - 1;  // the loop's ++s: the same moment in the finer grid
+      substeps *= factor;
+      refined = factor > 1;
+    }
   }
+  if (control)
+    obj.substeps = frame_error < 0.2f * tolerance && substeps > base ? substeps / 2 : substeps;
   obj.stats = FrameStats{};
+  obj.stats.substeps = taken;
+  obj.stats.error = frame_error;
   // feedback: the frame's impulse over the frame's length is its mean force
   if (obj.feedback_on)
     for (size_t k = 0; k < obj.feedback.size(); ++k)
@@ -359,7 +450,7 @@ FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, b
   if (!f) throw GeometryError(path + ": cannot write");
   std::fputs(
       "frame,time,points,constraints,wall_ms,max_penetration,mean_penetration,max_strain,"
-      "kinetic_energy\n",
+      "kinetic_energy,substeps,error\n",
       f);
   std::fclose(f);
   std::filesystem::remove(dir_ + "/colliders.csv");  // written from the first frame with feedback
@@ -377,9 +468,9 @@ void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s
   std::string path = dir_ + "/stats.csv";
   FILE* f = std::fopen(path.c_str(), "a");
   if (!f) throw GeometryError(path + ": cannot write");
-  std::fprintf(f, "%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g\n", s.frame, s.time, s.points,
-               s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration, s.max_strain,
-               s.kinetic_energy);
+  std::fprintf(f, "%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
+               s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
+               s.max_strain, s.kinetic_energy, s.substeps, s.error);
   std::fclose(f);
   if (s.colliders.empty()) return;
   path = dir_ + "/colliders.csv";

@@ -27,6 +27,8 @@ struct FrameStats {
   float mean_penetration = 0;  // mean over overlapping pairs
   float max_strain = 0;        // max |strain| over constraints
   double kinetic_energy = 0;   // sum of m v^2 / 2 (J)
+  int substeps = 0;            // substeps the frame took (error control may vary it)
+  float error = 0;             // largest substep error the grains nodes reported (0: none)
   // collision feedback (enable_collision_feedback): the frame's mean force (N) and torque (N m,
   // about the collider's translate) on each collider; empty when no node reported any
   struct ColliderForce {
@@ -56,6 +58,7 @@ struct SimObject {
   bool colliders_posed = false;
   std::vector<ColliderFeedback> feedback;  // per collider, this frame (see ColliderFeedback)
   bool feedback_on = false;
+  int substeps = 0;  // error control: the count the next frame starts with (0: the solver's own)
   FrameStats stats;
 };
 

@@ -100,7 +100,16 @@ void register_solver_node() {
   t.doc = "Ends a chain: one particle object; runs its chain each substep and moves non-grains points.";
   t.role = NodeRole::Solver;
   t.params = {
-      ParamDecl::Int("substeps", 1, "substeps per frame; dt = 1 / (fps * substeps)").at_least(1),
+      ParamDecl::Int("substeps", 1,
+                     "substeps per frame, dt = 1 / (fps * substeps); with error control the fewest")
+          .at_least(1),
+      ParamDecl::Toggle("error_control", true,
+                        "pick the substeps each frame to keep the grains' error under error_tolerance"),
+      ParamDecl::Int("max_substeps", 256, "most substeps per frame error control may take").at_least(1),
+      ParamDecl::Float("error_tolerance", 0.0025,
+                       "error control's bound on the mean overlap of touching grains, as a fraction "
+                       "of their summed radii (a resting column's relative loss of height)")
+          .positive(),
       ParamDecl::List("colliders", "names of collider nodes this object collides with"),
   };
   t.make = [] { return std::make_unique<SolverNode>(); };

@@ -95,8 +95,11 @@ class GrainsNode : public Node {
       d.impact_normal = imp_n_.data();
       d.impact_collider = imp_c_.data();
     }
-    // no GrainsStats: the evaluator measures each frame itself (measure_frame)
-    solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(), nullptr);
+    // stats only for error control: the evaluator measures each frame itself (measure_frame)
+    GrainsStats stats;
+    solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(),
+                    ctx.substep_error ? &stats : nullptr);
+    if (ctx.substep_error) *ctx.substep_error = std::max(*ctx.substep_error, stats.mean_penetration);
     if (d.prim_count > 0) scatter_constraints(s);
     if (impacts) write_impacts(ctx, d);
     if (feedback && d.impact_collider && ctx.feedback && ctx.feedback->size() == ctx.colliders.size()) {
@@ -131,7 +134,10 @@ class GrainsNode : public Node {
   GrainsSettings settings(const ParamSet& p, const CookContext& ctx) const {
     GrainsSettings st;
     st.dt = static_cast<float>(ctx.time.dt);
-    st.substeps = ctx.time.substeps;
+    // stiffness fractions k / (substeps x iterations) count the solver's own substeps, so a
+    // stiffness means the same whatever error control adds
+    st.substeps = ctx.time.base_substeps;
+    st.keep_velocity = ctx.time.stabilize;
     st.threads = ctx.threads;
     st.constraint_iterations = p.i("constraint_iterations");
     st.particle_separation = static_cast<float>(p.f("particle_separation"));
@@ -167,6 +173,7 @@ class GrainsNode : public Node {
     st.velocity_blend = static_cast<float>(p.f("velocity_blend"));
     st.over_relaxation = static_cast<float>(p.f("over_relaxation"));
     st.chebyshev_rho = static_cast<float>(p.f("chebyshev_rho"));
+    st.pre_stabilization = p.b("pre_stabilization");
     st.update_collisions_during_iterations = p.b("update_collisions_during_iterations");
     st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
     st.final_collision_test = p.b("final_collision_test");
@@ -330,6 +337,7 @@ class GrainsNode : public Node {
 void register_grains_node() {
   NodeTypeInfo t;
   t.type = "grains";
+  t.reports_error = true;
   t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping, explicit constraints, pins, rigid shape matching, impact data, collision feedback).";
   t.params = {
       ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
@@ -338,13 +346,13 @@ void register_grains_node() {
                        "mean grain diameter hint: radius of points without pscale, mass-shock length scale").positive().unit("m"),
       ParamDecl::Int("constraint_iterations", 10, "Jacobi iterations per substep; about twice the stacking height").at_least(1),
       ParamDecl::Toggle("assume_uniform_radius", true, "search every grain as the largest one, with one grid cell size: faster; for grains of one size"),
-      ParamDecl::Float("friction_with_colliders", 1, "grain-collider friction; 0 slides, 1 matches the collider's velocity")
+      ParamDecl::Float("friction_with_colliders", 1, "grain-collider Coulomb friction: a lab mu is this with static_threshold 1 and scale_kinetic 1")
           .at_least(0).scaled_by("friction"),
-      ParamDecl::Float("friction_with_particles", 1, "grain-grain friction; 0 slides, 1 sticks")
+      ParamDecl::Float("friction_with_particles", 1, "grain-grain Coulomb friction: static mu = this x static_threshold, kinetic mu = this x scale_kinetic")
           .at_least(0).scaled_by("friction"),
-      ParamDecl::Toggle("accurate_friction", false, "apply friction every iteration instead of once after the loop"),
-      ParamDecl::Float("static_threshold", 1, "slip below this times the overlap is removed entirely (static friction)").at_least(0),
-      ParamDecl::Float("scale_kinetic", 0.5, "beyond it, remove min(1, scale_kinetic * overlap / slip) of the slip").at_least(0),
+      ParamDecl::Toggle("accurate_friction", true, "apply friction after every iteration instead of once after the loop"),
+      ParamDecl::Float("static_threshold", 1, "static friction: slip under this x friction x the contact's normal correction in the substep is removed").at_least(0),
+      ParamDecl::Float("scale_kinetic", 0.5, "kinetic friction: beyond it, a substep removes at most this x friction x the normal correction").at_least(0),
       ParamDecl::Float("internal_collisions_weight", 1, "weight of grain-grain collisions; 0 disables them")
           .range(0, 2).scaled_by("repulsionweight"),
       ParamDecl::Float("internal_collisions_stiffness", 1000, "stiffness of grain-grain collisions; full at substeps x iterations")
@@ -388,6 +396,8 @@ void register_grains_node() {
                        "Chebyshev acceleration of the iterations after the first 5 (not in POP Grains): the estimated "
                        "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
           .range(0, 0.95),
+      ParamDecl::Toggle("pre_stabilization", true,
+                        "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)"),
       ParamDecl::Toggle("update_collisions_during_iterations", false, "re-find collider planes every iteration"),
       ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),
       ParamDecl::Toggle("final_collision_test", true, "a swept collision pass after the loop: no leaks through thin or moving colliders"),

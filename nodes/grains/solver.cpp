@@ -6,7 +6,7 @@
 //      per grain (the nearest collider within range), once, or every iteration when asked
 //   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h),
 //      Chebyshev-extrapolated when chebyshev_rho > 0;
-//      without accurate_friction one friction-only pass follows the loop
+//      friction is its own pass after every iteration (accurate_friction) or after the loop
 //      (pins gather with the rest). Rigid shape matching is its own constraint group, projected
 //      after each iteration's averaged update (Gauss-Seidel across groups, Jacobi within one,
 //      as Macklin et al. 2014 Alg. 1): averaged in with a grain's contacts, a goal would pull
@@ -670,13 +670,16 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) gr_predict(&g, &prm, p_.data(), static_cast<int>(i));
 
-  // without accurate friction, one friction pass follows the loop, bounded by each contact's
-  // accumulated overlap
+  // friction (gr_friction_pass): once after the loop, or after every iteration with accurate
+  // friction, bounded by the normal corrections each contact applied, summed over the iterations
   const bool pair_friction_pass =
-      !s.accurate_friction && pairs_on && s.repulsion_weight > 0 && s.friction_with_particles > 0;
-  const bool collider_friction_pass =
-      !s.accurate_friction && colliders_on && s.friction_with_colliders > 0;
-  gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr};
+      pairs_on && s.repulsion_weight > 0 && s.friction_with_particles > 0;
+  const bool collider_friction_pass = colliders_on && s.friction_with_colliders > 0;
+  gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr, nullptr};
+  if (s.accurate_friction && (pair_friction_pass || collider_friction_pass)) {
+    friction_dx_.assign(3 * n, 0.0f);
+    acc.friction_dx = friction_dx_.data();
+  }
   const bool impacts = d.impact_impulse && colliders_on;
   if (impacts) {
     collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
@@ -788,8 +791,54 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   };
   if (colliders_on) planes(true);
 
+  // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
+  // removed from the start and predicted positions alike, without velocity
+  if (s.pre_stabilization && ((pairs_on && s.repulsion_weight > 0) || colliders_on)) {
+    gr_params ps = prm;
+    ps.clumping_weight = 0.0f;
+    gr_grains gs = g;
+    if (!(s.repulsion_weight > 0)) gs.nbr_offsets = nullptr;
+    P_stable_.resize(3 * n + 1);
+    p_stable_next_.resize(3 * n + 1);
+    std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
+    // until no grain moves more than kStabilizeTolerance of its radius, at most
+    // kStabilizeIterations: at rest one pass finds almost nothing and stops
+    for (int k = 0; k < kStabilizeIterations; ++k) {
+      const float* x = P_stable_.data();
+      float* next = p_stable_next_.data();
+      float moved = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved)
+      for (long i = 0; i < ln; ++i) {
+        const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i));
+        const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
+        moved = std::max(moved, gr_length(d) / radius_[i]);
+        gr_store3(next, i, y);
+      }
+      P_stable_.swap(p_stable_next_);
+      if (!(moved > kStabilizeTolerance)) break;
+    }
+    float* p = p_.data();
+    const float* x = P_stable_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i)
+      for (int a = 0; a < 3; ++a) p[3 * i + a] += x[3 * i + a] - P0_[3 * i + a];
+    g.P = P_stable_.data();
+  }
+
   // 3. Jacobi iterations
-  const int with_friction = s.accurate_friction ? 1 : 0;
+  // friction is its own pass (gr_friction_pass), never inside the contact gather
+  const bool friction_pass = pair_friction_pass || collider_friction_pass;
+  auto run_friction = [&] {
+    const float* p = p_.data();
+    float* next = p_next_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) {
+      int ii = static_cast<int>(i);
+      gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
+    }
+    p_.swap(p_next_);
+    if (shapes_on) project_shapes(threads);  // friction moved grains one by one
+  };
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
@@ -811,25 +860,16 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp for schedule(static)
       for (long i = 0; i < ln; ++i) {
         int ii = static_cast<int>(i);
-        gr_float3 x = gr_iterate(&g, &prm, p, ii, with_friction, &mine);
+        gr_float3 x = gr_iterate(&g, &prm, p, ii, &mine);
         if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
         gr_store3(next, ii, x);
       }
     }
     (chebyshev ? p_before_ : p_next_).swap(p_);
     if (shapes_on) project_shapes(threads);
+    if (friction_pass && s.accurate_friction) run_friction();
   }
-  if (pair_friction_pass || collider_friction_pass) {
-    const float* p = p_.data();
-    float* next = p_next_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) {
-      int ii = static_cast<int>(i);
-      gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
-    }
-    p_.swap(p_next_);
-    if (shapes_on) project_shapes(threads);  // friction moved grains one by one
-  }
+  if (friction_pass && !s.accurate_friction) run_friction();
 
   // 4. velocity, drift, final collisions; write P and v
   {
@@ -842,6 +882,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       int ii = static_cast<int>(i);
       gr_float3 Pk, vk;
       gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
+      if (s.keep_velocity) vk = gr_load3(d.v, ii);
       // back to world space (exact for a grain that stays: see local_origin)
       const Vec3 a = load3(d.P, i);
       Vec3 b = to_vec(Pk) + origin, v = to_vec(vk);

@@ -25,12 +25,13 @@ struct GrainsSettings {
   float particle_separation = 0.1f;  // mean diameter hint (m): missing pscale and mass-shock scale
   bool assume_uniform_radius = true;
   // friction
-  // (Macklin 2014 eqs. 23-25; kernels/contact.h). The friction scales multiply the overlap that
-  // bounds friction, so static_threshold x friction is the Coulomb coefficient (a grain sticks on
-  // an incline while tan(angle) < it) and scale_kinetic x friction the kinetic one.
+  // (Macklin 2014 eqs. 23-25; kernels/iterate.h gr_friction_pass). Coulomb's law bounded by the
+  // normal correction each contact applied in the substep: static_threshold x friction is the
+  // static coefficient (a grain sticks on an incline while tan(angle) < it) and
+  // scale_kinetic x friction the kinetic one.
   float friction_with_colliders = 1.0f;  // x `friction` point attribute
   float friction_with_particles = 1.0f;  // x `friction` point attribute
-  bool accurate_friction = false;        // friction every iteration instead of one pass after
+  bool accurate_friction = true;         // friction after every iteration instead of one pass after
   float static_threshold = 1.0f;         // |dx_t| < static_threshold * overlap: stick
   float scale_kinetic = 0.5f;            // else remove min(1, scale_kinetic * overlap / |dx_t|)
   // internal collisions
@@ -71,6 +72,15 @@ struct GrainsSettings {
   // Chebyshev acceleration of the iterations (kernels/iterate.h): the estimated spectral radius
   // rho of the Jacobi iteration, 0 = off. Not on the help page.
   float chebyshev_rho = 0.0f;
+  // pre-stabilization (kernels/iterate.h gr_stabilize): contacts iterated on the start positions
+  // until they hold, moving start and prediction alike, so old overlap adds no velocity. Not on
+  // the help page.
+  bool pre_stabilization = true;
+  // the first substep after error control refined the step: its constraints remove the overlap
+  // the coarser step left, but the grains keep the velocity they started with, since that
+  // overlap, resolved in one finer step, would become a speed overlap / dt (set by the node from
+  // TimeInfo::stabilize, not a parameter)
+  bool keep_velocity = false;
   bool update_collisions_during_iterations = false;
   bool update_neighbors_during_iterations = false;
   bool final_collision_test = true;
@@ -165,11 +175,16 @@ class GrainsSolver {
   const float* P0_ = nullptr;
   std::vector<float> P0_copy_;
   std::vector<float> target_local_;  // (n x 3) m: targetP minus that origin, when it is not 0
-  // accumulated contact overlaps bounding the friction pass after the loop (no accurate friction)
+  // accumulated contact overlaps bounding the friction pass (gr_friction_pass)
   std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
   std::vector<float> pair_normal_it_;  // (threads x row_stride_) m: this iteration's overlaps
   size_t row_length_ = 1;              // the longest neighbour row
   size_t row_stride_ = 1;              // floats between threads' rows in pair_normal_it_
+  // pre-stabilization: start positions with the overlaps they began with removed (g.P after it)
+  static constexpr float kStabilizeTolerance = 0.002f;  // of a grain's radius
+  static constexpr int kStabilizeIterations = 64;
+  std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
+  std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   std::vector<uint32_t> row_kept_;     // (n) entries each row keeps, in drop_constrained_pairs
   // accumulated collider overlaps for the friction pass (no accurate friction), per plane entry
   std::vector<float> collider_normal_;  // (plane entries) m

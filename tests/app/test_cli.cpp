@@ -37,7 +37,7 @@ TEST_CASE("run writes every frame and stats.csv", "[cli]") {
   CHECK(last.has("force"));
   std::string stats = read_text(out + "/stats.csv");
   CHECK_THAT(stats, Catch::StartsWith("frame,time,points,constraints,wall_ms,max_penetration,"
-                                      "mean_penetration,max_strain,kinetic_energy\n"));
+                                      "mean_penetration,max_strain,kinetic_energy,substeps,error\n"));
   CHECK(std::count(stats.begin(), stats.end(), '\n') == 4);
   CHECK_THAT(stats, Catch::Contains("\n3,0.125,27,0,"));
   // not a terminal: one log line per frame
@@ -107,7 +107,7 @@ TEST_CASE("a graph's frames are bit-identical for 1 and 2 threads", "[cli][deter
     std::string out;
     for (const std::string& line : split(csv, '\n')) {
       std::vector<std::string> cells = split(line, ',');
-      REQUIRE(cells.size() == 9);  // frame,time,points,constraints,wall_ms,...
+      REQUIRE(cells.size() == 11);  // frame,time,points,constraints,wall_ms,...,substeps,error
       cells.erase(cells.begin() + 4);
       for (const std::string& c : cells) out += c + ",";
       out += "\n";

@@ -108,7 +108,7 @@ std::map<std::string, Scene> scenes() {
                        {{"name", "g"}, {"type", "force"}, {"inputs", {"n"}}, {"params", {{"force", {0, -9.81, 0}}}}},
                        ground(),
                        {{"name", "s"}, {"type", "solver"}, {"inputs", {"g"}},
-                        {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+                        {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"ground"}}}}}});
   };
   auto pop = [](const std::string& type, json defaults) {
     return [type, defaults](const json& p) {
@@ -119,7 +119,7 @@ std::map<std::string, Scene> scenes() {
                           {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
                          n, ground(),
                          {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
-                          {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+                          {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"ground"}}}}}});
     };
   };
   s["force"] = pop("force", {{"force", {0.5, 1, 0}}});
@@ -157,7 +157,7 @@ std::map<std::string, Scene> scenes() {
     nodes.push_back(n);
     nodes.push_back(ground());
     nodes.push_back({{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
-                     {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}});
+                     {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"ground"}}}}});
     return base_graph(nodes);
   };
   s["target"] = [](const json& p) {
@@ -171,7 +171,7 @@ std::map<std::string, Scene> scenes() {
                         {"params", {{"target_stiffness", 10}, {"constraint_iterations", 6}}}},
                        ground(),
                        {{"name", "s"}, {"type", "solver"}, {"inputs", {"gr"}},
-                        {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+                        {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"ground"}}}}}});
   };
   // explicit constraints: a connected sheet of overlapping grains (pscale 0.06 at 0.1 m) dropped
   // on a sphere, and a connected line of grains (a strand) beside it
@@ -191,7 +191,7 @@ std::map<std::string, Scene> scenes() {
                         {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
                        n, ground(), ball,
                        {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
-                        {"params", {{"substeps", 2}, {"colliders", {"ground", "ball"}}}}}});
+                        {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"ground", "ball"}}}}}});
   };
   s["collider"] = [](const json& p) {
     json c = {{"name", "n"}, {"type", "collider"}, {"params", {{"shape", "box"}, {"size", {2, 0.2, 2}}}}};
@@ -201,14 +201,17 @@ std::map<std::string, Scene> scenes() {
                         {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
                        c,
                        {{"name", "s"}, {"type", "solver"}, {"inputs", {"g"}},
-                        {"params", {{"substeps", 2}, {"colliders", {"n"}}}}}});
+                        {"params", {{"substeps", 2}, {"error_control", false}, {"colliders", {"n"}}}}}});
   };
   s["solver"] = [](const json& p) {
-    json sv = {{"name", "n"}, {"type", "solver"}, {"inputs", {"g"}}, {"params", {{"colliders", {"ground"}}}}};
+    // a grains node below: error control acts on what grains report
+    json sv = {{"name", "n"}, {"type", "solver"}, {"inputs", {"gr"}}, {"params", {{"colliders", {"ground"}}}}};
     sv["params"].update(p);
     return base_graph({heap_source(),
                        {{"name", "g"}, {"type", "force"}, {"inputs", {"src"}},
                         {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                       {{"name", "gr"}, {"type", "grains"}, {"inputs", {"g"}},
+                        {"params", {{"particle_separation", 0.1}}}},
                        ground(), sv});
   };
   return s;
@@ -261,6 +264,8 @@ std::map<std::string, Special> specials() {
       {"collider.scale", {json::object(), 1.5}},
       // solver
       {"solver.colliders", {json::object(), json::array()}},
+      // the heap asks for more than a few substeps: a low cap binds
+      {"solver.max_substeps", {json::object(), 2}},
       // grains
       {"grains.activation", {json::object(), 0}},
       {"grains.group", {json::object(), "nobody"}},

@@ -8,9 +8,9 @@
  * Contact: penetration d = r_i - (p_i - x_s) . n > 0 pushes the grain out by d n in full (the
  * collider has infinite mass: share 1). Colliders must always hold, so the contact is not scaled
  * by the repulsion weight or stiffness.
- * Friction: the slip relative to the collider's own motion, dx = (p_i - P_i) - v_c dt, is
- * treated as eqs. 23-25 with bound d' = friction_with_colliders * friction_i * d: removed in
- * full when |dx_t| < static_threshold * d', else by min(1, scale_kinetic * d' / |dx_t|). */
+ * Friction: the slip relative to the collider's own motion, dx = (p_i - P_i) - v_c dt, joins
+ * the grain's other contacts in gr_friction_pass (iterate.h), bounded by the penetration the
+ * plane removed in the substep times friction_with_colliders x the `friction` attribute. */
 #ifndef GRAINS_KERNELS_COLLIDER_H
 #define GRAINS_KERNELS_COLLIDER_H
 #include "contact.h"
@@ -26,22 +26,14 @@ GR_INLINE float gr_plane_penetration(const gr_grains* g, int i, gr_uint e, gr_fl
   return g->radius[i] - gr_dot(gr_sub(x, xs), gr_plane_normal(g, e));
 }
 
-GR_INLINE gr_float3 gr_collider_friction(const gr_grains* g, const gr_params* prm,
-                                         const GR_GLOBAL float* p, int i, gr_uint e, float d) {
-  gr_float3 n = gr_plane_normal(g, e);
-  gr_float3 vc = gr_make3(g->plane[9 * e + 6], g->plane[9 * e + 7], g->plane[9 * e + 8]);
-  gr_float3 dx = gr_madd(gr_sub(gr_load3(p, i), gr_load3(g->P, i)), vc, -prm->dt);
-  float bound = prm->friction_with_colliders * gr_attr(g->friction, i) * d;
-  return gr_friction(dx, n, bound, prm->static_threshold, prm->scale_kinetic);
-}
-
-/* One Jacobi iteration's collider corrections of grain i (with friction when `with_friction`).
+/* One Jacobi iteration's collider corrections of grain i (friction is gr_friction_pass's).
  * Adds to *sum, returns how many planes produced a correction; overlap[k] receives the
  * penetration seen in the k-th plane of i's row (0: none). */
 GR_INLINE int gr_gather_collider(const gr_grains* g, const gr_params* prm,
-                                 const GR_GLOBAL float* p, int i, int with_friction,
+                                 const GR_GLOBAL float* p, int i,
                                  float* overlap, gr_float3* sum) {
   int count = 0;
+  (void)prm;
   int k;
   gr_uint e;
   gr_float3 pi = gr_load3(p, i);
@@ -50,31 +42,36 @@ GR_INLINE int gr_gather_collider(const gr_grains* g, const gr_params* prm,
     float d = gr_plane_penetration(g, i, e, pi);
     if (!(d > 0.0f)) continue;
     overlap[k] = d;
-    gr_float3 corr = gr_scale(gr_plane_normal(g, e), d);
-    if (with_friction && prm->friction_with_colliders > 0.0f)
-      corr = gr_add(corr, gr_collider_friction(g, prm, p, i, e, d));
-    *sum = gr_add(*sum, corr);
+    *sum = gr_madd(*sum, gr_plane_normal(g, e), d);
     ++count;
   }
   return count;
 }
 
-/* The friction pass after the loop (accurate_friction off), bounded by each plane's accumulated
- * penetration normal[k], k = the plane's place in i's row (see gr_gather_pair_friction). */
-GR_INLINE int gr_gather_collider_friction(const gr_grains* g, const gr_params* prm,
-                                          const GR_GLOBAL float* p, const GR_GLOBAL float* normal,
-                                          int i, gr_float3* sum) {
-  int count = 0;
+/* Grain i's collider planes into *f (gr_slip_sums): the slip relative to the collider's own
+ * motion, dx = (p_i - P_i) - v_c dt, for each plane that pushed it out during the substep
+ * (normal[k] > 0, k = the plane's place in i's row: the penetration it removed, summed over the
+ * iterations); the collider takes no share. w[k] receives each plane's weighted bound, for
+ * impact data. */
+GR_INLINE void gr_gather_collider_slip(const gr_grains* g, const gr_params* prm,
+                                       const GR_GLOBAL float* p, const GR_GLOBAL float* normal,
+                                       int i, gr_slip_sums* f, float* w) {
   int k;
   gr_uint e;
+  const gr_float3 di = gr_sub(gr_load3(p, i), gr_load3(g->P, i));
+  const float mu = prm->friction_with_colliders * gr_attr(g->friction, i);
+  for (k = 0; k < GR_MAX_PLANES; ++k) w[k] = 0.0f;
   for (e = g->plane_offsets[i], k = 0; e < g->plane_offsets[i + 1]; ++e, ++k) {
     if (!(normal[k] > 0.0f)) continue;
-    gr_float3 corr = gr_collider_friction(g, prm, p, i, e, normal[k]);
-    if (corr.x == 0.0f && corr.y == 0.0f && corr.z == 0.0f) continue;
-    *sum = gr_add(*sum, corr);
-    ++count;
+    gr_float3 n = gr_plane_normal(g, e);
+    gr_float3 vc = gr_make3(g->plane[9 * e + 6], g->plane[9 * e + 7], g->plane[9 * e + 8]);
+    gr_float3 dx = gr_madd(di, vc, -prm->dt);
+    gr_float3 s = gr_madd(dx, n, -gr_dot(dx, n));
+    float sl = gr_length(s);
+    if (!(sl > 0.0f)) continue;
+    gr_add_slip(f, s, sl, 1.0f, mu, normal[k]);
+    w[k] = sl * mu * normal[k];
   }
-  return count;
 }
 
 #endif /* GRAINS_KERNELS_COLLIDER_H */

@@ -7,13 +7,13 @@
  *          * min(1, repulsion_stiffness * repulsionstiffness_i / (substeps * iterations)).
  *
  * Friction, eqs. 23-25: the pair's relative displacement over the substep
- *   dx = (p_i - P_i) - (p_j - P_j), its tangential part dx_t = dx - (dx . n) n;
- *   |dx_t| <  static_threshold * d':  remove all of it (static),
- *   otherwise remove the fraction min(1, scale_kinetic * d' / |dx_t|) (kinetic),
- * i's share w_i / (w_i + w_j). The friction scale (friction_with_particles x the `friction`
- * attribute) multiplies the overlap bound, d' = scale * d: it is the Coulomb coefficient, so
- * 0 = no friction and the sticking angle rises with it. Friction is bounded by overlap, so it
- * grows when contacts are soft (help page note). */
+ *   dx = (p_i - P_i) - (p_j - P_j), its tangential part, the slip s = dx - (dx . n) n, i's share
+ *   w_i / (w_i + w_j); bounded like Coulomb friction by the normal correction the contact applied
+ *   in the substep, times the friction scale (friction_with_particles x the `friction`
+ *   attribute): static_threshold x scale is the static coefficient, scale_kinetic x scale the
+ *   kinetic one. The grain combines its contacts in gr_friction_pass (iterate.h); this file
+ *   gathers them (gr_gather_pair_slip). The bound grows with the normal corrections, so soft
+ *   contacts, pushed apart over more iterations, rub longer (help page note). */
 #ifndef GRAINS_KERNELS_CONTACT_H
 #define GRAINS_KERNELS_CONTACT_H
 #include "clumping.h"
@@ -41,16 +41,6 @@ GR_INLINE float gr_repulsion_scale(const gr_grains* g, const gr_params* prm, int
 GR_INLINE gr_float3 gr_pair_normal(gr_float3 xij, float dist, int i, int j) {
   if (dist > 0.0f) return gr_scale(xij, 1.0f / dist);
   return gr_make3(0.0f, i < j ? -1.0f : 1.0f, 0.0f);
-}
-
-/* Friction of pair (i, j) with overlap bound `overlap` (before the friction scale), i's share */
-GR_INLINE gr_float3 gr_pair_friction(const gr_grains* g, const gr_params* prm,
-                                     const GR_GLOBAL float* p, int i, int j, gr_float3 n,
-                                     float overlap, float share) {
-  gr_float3 dx = gr_sub(gr_sub(gr_load3(p, i), gr_load3(g->P, i)),
-                        gr_sub(gr_load3(p, j), gr_load3(g->P, j)));
-  float bound = prm->friction_with_particles * gr_attr(g->friction, i) * overlap;
-  return gr_scale(gr_friction(dx, n, bound, prm->static_threshold, prm->scale_kinetic), share);
 }
 
 /* the contact loop's lanes: gr_gather_contacts_lanes */
@@ -162,13 +152,13 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
 }
 
 /* One Jacobi iteration's pair corrections of grain i (contacts, with friction when
- * `with_friction`, and clumping), read from the iterate p. Adds to *sum, returns how many
+ * clumping; friction is gr_friction_pass's), read from the iterate p. Adds to *sum, returns how many
  * constraints produced a nonzero correction. When `overlap_out` is not null, overlap_out[k] receives
  * the contact overlap seen this iteration with the k-th entry of i's neighbour row (0: none).
  * Most candidates are apart: they are rejected on the squared distance, before any square root,
  * division or attribute read. */
 GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
-                              int i, int with_friction, GR_GLOBAL float* overlap_out,
+                              int i, GR_GLOBAL float* overlap_out,
                               gr_float3* sum) {
   int count = 0;
   gr_uint k;
@@ -178,9 +168,8 @@ GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GL
   float clump = prm->clumping_weight > 0.0f ? gr_clump_scale(g, prm, i) : 0.0f;
   /* squared reach of a candidate that can act, in units of (r_i + r_j)^2 */
   float reach2 = clump > 0.0f ? prm->query_scale * prm->query_scale : 1.0f;
-  int fric = with_friction && prm->friction_with_particles > 0.0f;
   int skip_constrained = g->con_offsets && !prm->collide_constrained && !g->nbr_unconstrained;
-  if (!(clump > 0.0f) && !fric && !skip_constrained && prm->mass_shock != 2) {
+  if (!(clump > 0.0f) && !skip_constrained && prm->mass_shock != 2) {
     if (!(repulse > 0.0f)) {
       if (overlap_out)
         for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) overlap_out[k - g->nbr_offsets[i]] = 0.0f;
@@ -210,7 +199,6 @@ GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GL
       float d = rsum - dist;
       float share = gr_pair_share(g, prm, i, j);
       corr = gr_scale(n, share * d * repulse);
-      if (fric) corr = gr_add(corr, gr_pair_friction(g, prm, p, i, j, n, d, share));
       if (overlap_out) overlap_out[k - row_begin] = d;
     } else if (clump > 0.0f && dist < prm->query_scale * rsum) {
       gr_float3 n = gr_scale(xij, 1.0f / dist);
@@ -227,32 +215,46 @@ GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GL
   return count;
 }
 
-/* The friction pass after the constraint loop (accurate_friction off): friction only, once,
- * bounded by each contact's accumulated overlap `normal` (per neighbour entry, as float bits):
- * the sum over the iterations of the overlap each saw, divided like the corrections by the
- * grain's constraint count. It is the position-level normal impulse the contact delivered
- * (Coulomb: friction <= mu x normal impulse) and, like the per-iteration bound of accurate
- * friction, grows when contacts are soft and with iterations (help page notes). The final
- * overlap alone would vanish whenever a contact converged. */
-GR_INLINE int gr_gather_pair_friction(const gr_grains* g, const gr_params* prm,
-                                      const GR_GLOBAL float* p, const GR_GLOBAL gr_uint* normal,
-                                      int i, gr_float3* sum) {
-  int count = 0;
-  gr_float3 pi = gr_load3(p, i);
+/* The sums gr_friction_pass combines a grain's contacts from (each contact c with tangential
+ * slip s_c over the substep, |s_c| = sl_c > 0, that pushed its pair apart in the substep: a_c > 0,
+ * the relative normal correction it applied, summed over the iterations). */
+typedef struct {
+  gr_float3 target;  /* sum of sl_c x (-share_c s_c): removals weighted by slip */
+  gr_float3 plain;   /* sum of -share_c s_c (disable_constraint_averaging) */
+  float weight;      /* sum of sl_c */
+  float bound;       /* sum of sl_c x mu_c x share_c x a_c */
+  float largest;     /* max sl_c */
+} gr_slip_sums;
+
+GR_INLINE void gr_add_slip(gr_slip_sums* f, gr_float3 s, float sl, float share, float mu, float a) {
+  f->target = gr_madd(f->target, s, -sl * share);
+  f->plain = gr_madd(f->plain, s, -share);
+  f->weight += sl;
+  f->bound += sl * mu * share * a;
+  f->largest = gr_max(f->largest, sl);
+}
+
+/* Grain i's contacts with its neighbours into *f (see gr_slip_sums); normal[k] holds a_c as
+ * float bits per neighbour entry. */
+GR_INLINE void gr_gather_pair_slip(const gr_grains* g, const gr_params* prm,
+                                   const GR_GLOBAL float* p, const GR_GLOBAL gr_uint* normal, int i,
+                                   gr_slip_sums* f) {
+  const gr_float3 pi = gr_load3(p, i);
+  const gr_float3 di = gr_sub(pi, gr_load3(g->P, i));
+  const float mu = prm->friction_with_particles * gr_attr(g->friction, i);
   gr_uint k;
   for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
     int j = (int)g->nbr_indices[k];
-    float d = gr_as_float(normal[k]);
-    if (j == i || !(d > 0.0f)) continue;
-    gr_float3 xij = gr_sub(pi, gr_load3(p, j));
+    float a = gr_as_float(normal[k]);
+    if (j == i || !(a > 0.0f)) continue;
+    gr_float3 pj = gr_load3(p, j);
+    gr_float3 xij = gr_sub(pi, pj);
     gr_float3 n = gr_pair_normal(xij, gr_length(xij), i, j);
-    gr_float3 corr = gr_pair_friction(g, prm, p, i, j, n, d, gr_pair_share(g, prm, i, j));
-    if (corr.x != 0.0f || corr.y != 0.0f || corr.z != 0.0f) {
-      *sum = gr_add(*sum, corr);
-      ++count;
-    }
+    gr_float3 dx = gr_sub(di, gr_sub(pj, gr_load3(g->P, j)));
+    gr_float3 s = gr_madd(dx, n, -gr_dot(dx, n));
+    float sl = gr_length(s);
+    if (sl > 0.0f) gr_add_slip(f, s, sl, gr_pair_share(g, prm, i, j), mu, a);
   }
-  return count;
 }
 
 #endif /* GRAINS_KERNELS_CONTACT_H */

@@ -9,8 +9,8 @@
 #include "collider.h"
 #include "pin.h"
 
-/* Accumulated contact overlaps for the friction pass after the loop (accurate_friction off);
- * all null when not needed. */
+/* Accumulated contact corrections for the friction pass (gr_friction_pass); all null when not
+ * needed. */
 typedef struct {
   GR_GLOBAL float* pair_iteration; /* (row length) overlap this iteration: the caller's
                                     * scratch for the grain being iterated (per thread) */
@@ -23,6 +23,9 @@ typedef struct {
    * grain's corrections is split among its planes in proportion to their overlaps (exact for
    * one plane, the common case). */
   GR_GLOBAL float* collider_dx;
+  /* (n x 3) m: the friction each grain received so far in the substep (accurate friction); null
+   * when the friction pass runs once */
+  GR_GLOBAL float* friction_dx;
 } gr_normal_sums;
 
 GR_INLINE gr_float3 gr_average(gr_float3 p, gr_float3 sum, int count, float omega,
@@ -73,17 +76,17 @@ GR_INLINE void gr_add_collider_dx(GR_GLOBAL float* collider_dx, int i, gr_float3
   }
 }
 
-/* constraint loop: contacts (+ friction when with_friction), clumping, collider planes,
+/* constraint loop: contacts, clumping, collider planes,
  * explicit constraints, pins */
 GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
-                               int i, int with_friction, const gr_normal_sums* acc) {
+                               int i, const gr_normal_sums* acc) {
   /* acc->pair_iteration is row scratch, read back below; acc->pair is per neighbour entry */
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
   gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0, ccount = 0;
   float pen[GR_MAX_PLANES];
-  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, with_friction, acc->pair_iteration, &sum);
-  if (g->plane_offsets) ccount = gr_gather_collider(g, prm, p, i, with_friction, pen, &csum);
+  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, p, i, acc->pair_iteration, &sum);
+  if (g->plane_offsets) ccount = gr_gather_collider(g, prm, p, i, pen, &csum);
   count += ccount;
   sum = gr_add(sum, csum);
   if (g->con_offsets) count += gr_gather_constraints(g, prm, p, i, &sum);
@@ -115,25 +118,70 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_averaging);
 }
 
-/* the friction pass after the loop (accurate_friction off): averaged, not over-relaxed */
+/* Pre-stabilization (Macklin et al. 2014 §4.4): one Jacobi iteration of the contacts alone
+ * (grain pairs and collider planes, averaged, no friction) on the start-of-substep positions x.
+ * The solver moves both the start and the predicted position of each grain by the result, so
+ * overlap left from earlier substeps or made by emission is removed without turning into
+ * velocity: resolved inside a substep, an overlap d becomes a speed d / dt, which grows as the
+ * substeps shrink. prm must have clumping off. */
+GR_INLINE gr_float3 gr_stabilize(const gr_grains* g, const gr_params* prm,
+                                 const GR_GLOBAL float* x, int i) {
+  gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
+  int count = 0;
+  float pen[GR_MAX_PLANES];
+  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, x, i, 0, &sum);
+  if (g->plane_offsets) count += gr_gather_collider(g, prm, x, i, pen, &sum);
+  return gr_average(gr_load3(x, i), sum, count, 1.0f, prm->disable_averaging);
+}
+
+/* Friction of grain i (DESIGN §4 "friction"; Macklin et al. 2014 eqs. 23-25, bounded as XPBD
+ * bounds friction by the normal multiplier, Mueller et al. 2020), over all its contacts at once,
+ * each contact's slip s_c weighing it (gr_slip_sums):
+ *   t = sum sl_c (-share_c s_c) / sum sl_c: the slip the grain must lose to move with what it
+ *       touches; contacts that slip alike (a grain resting on three) agree on it, and contacts
+ *       that move with the grain (its neighbours in a sliding block) hardly count;
+ *   B = sum sl_c mu_c share_c a_c / max sl_c: the Coulomb bound, the normal corrections a_c the
+ *       slipping contacts applied in the substep times their friction, summed, not averaged;
+ *   F = the friction the grain already received in the substep (accurate friction: the pass
+ *       runs after every iteration; otherwise once after the loop, F = 0):
+ *   |t + F| <= static_threshold B: apply t (static);
+ *   otherwise apply t min(1, max(0, scale_kinetic B - |F|) / |t|) (kinetic: the substep's
+ *   friction totals scale_kinetic B).
+ * The bound grows with the normal corrections, which scale with the same dt^2 as the slip, so
+ * sticking does not depend on the substep or iteration counts, nor on how many contacts share
+ * the load. With disable_constraint_averaging t is the plain sum of the removals, so equal and
+ * opposite pair frictions keep momentum. Not over-relaxed. */
 GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
                                      const GR_GLOBAL float* p, const gr_normal_sums* acc, int i) {
-  gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
-  gr_float3 csum = gr_make3(0.0f, 0.0f, 0.0f);
-  int count = 0, ccount = 0;
-  if (acc->pair && g->nbr_offsets) count += gr_gather_pair_friction(g, prm, p, acc->pair, i, &sum);
+  gr_slip_sums f;
+  gr_slip_sums c;
+  float w[GR_MAX_PLANES];
+  f.target = gr_make3(0.0f, 0.0f, 0.0f);
+  f.plain = f.target;
+  f.weight = f.bound = f.largest = 0.0f;
+  c = f;
+  const gr_float3 pi = gr_load3(p, i);
+  if (acc->pair && g->nbr_offsets) gr_gather_pair_slip(g, prm, p, acc->pair, i, &f);
   if (acc->collider && g->plane_offsets)
-    ccount = gr_gather_collider_friction(g, prm, p, acc->collider + g->plane_offsets[i], i, &csum);
-  count += ccount;
-  sum = gr_add(sum, csum);
-  if (acc->collider_dx && ccount) {
-    float w[GR_MAX_PLANES];
-    const gr_uint b = g->plane_offsets[i], e = g->plane_offsets[i + 1];
-    int k;
-    for (k = 0; k < GR_MAX_PLANES; ++k) w[k] = b + (gr_uint)k < e ? acc->collider[b + k] : 0.0f;
-    gr_add_collider_dx(acc->collider_dx, i, csum, gr_average_factor(count, 1.0f, prm->disable_averaging), w);
-  }
-  return gr_average(gr_load3(p, i), sum, count, 1.0f, prm->disable_averaging);
+    gr_gather_collider_slip(g, prm, p, acc->collider + g->plane_offsets[i], i, &c, w);
+  const float weight = f.weight + c.weight;
+  const float largest = gr_max(f.largest, c.largest);
+  if (!(weight > 0.0f) || !(largest > 0.0f)) return pi;
+  const float bound = (f.bound + c.bound) / largest;
+  gr_float3 t = prm->disable_averaging ? gr_add(f.plain, c.plain)
+                                       : gr_scale(gr_add(f.target, c.target), 1.0f / weight);
+  const float tl = gr_length(t);
+  if (!(tl > 0.0f) || !(bound > 0.0f)) return pi;
+  gr_float3 F = acc->friction_dx ? gr_load3(acc->friction_dx, i) : gr_make3(0.0f, 0.0f, 0.0f);
+  float frac = 1.0f;
+  if (!(gr_length(gr_add(t, F)) <= prm->static_threshold * bound))
+    frac = gr_min(1.0f, gr_max(0.0f, prm->scale_kinetic * bound - gr_length(F)) / tl);
+  const gr_float3 applied = gr_scale(t, frac);
+  if (acc->friction_dx) gr_store3(acc->friction_dx, i, gr_add(F, applied));
+  /* the colliders' part, for impact data: their share of the bound */
+  if (acc->collider_dx && c.bound > 0.0f)
+    gr_add_collider_dx(acc->collider_dx, i, applied, c.bound / (f.bound + c.bound), w);
+  return gr_add(pi, applied);
 }
 
 #endif /* GRAINS_KERNELS_ITERATE_H */

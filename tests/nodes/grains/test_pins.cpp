@@ -78,7 +78,7 @@ TEST_CASE("no targetstiffness attribute means no pin", "[grains][pins]") {
   // being cleared each substep, so use the `force` node then `grains` through a graph instead
   Graph g = graph({{{"name", "g"}, {"type", "force"}, {"params", {{"force", {0, -9.81, 0}}}}},
                    {{"name", "n"}, {"type", "grains"}, {"inputs", {"g"}}, {"params", json::object()}},
-                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}}, {"params", {{"substeps", 2}}}}});
+                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}}, {"params", {{"substeps", 2}, {"error_control", false}}}}});
   auto run = [&](ParticleStore pts) {
     Simulation sim(g, 2);
     sim.set_points(0, std::move(pts));

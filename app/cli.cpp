@@ -2,12 +2,14 @@
 #include "app/cli.h"
 
 #include "app/bench.h"
+#include "app/dem_measures.h"
 #include "app/validation.h"
 
 #include <omp.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -143,6 +145,24 @@ int cmd_cook(const std::string& type, const std::string& in, const std::vector<s
   return 0;
 }
 
+// `grains heap`: the angle of a heap (app/heap.h) in one frame.
+int cmd_heap(const std::string& path, double d, double cx, double cz) {
+  ParticleStore pts = read_ply(path);
+  if (!(d > 0)) {
+    const float* ps = pts.f_if("pscale");
+    if (!ps || pts.size() == 0) throw LoadError(path, "", "no pscale attribute: give --d");
+    std::vector<float> r(ps, ps + pts.size());
+    std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+    d = 2.0 * r[r.size() / 2];
+  }
+  HeapAngle h = heap_angle(pts, d, cx, cz);
+  std::printf("%s: heap angle %.1f deg (sd %.1f over %d sectors), cone %.1f deg, peak %.3f m, "
+              "foot radius %.3f m, %zu grains (d %.4g m)\n",
+              path.c_str(), h.angle_deg, h.spread_deg, h.sectors, h.cone_deg, h.peak,
+              h.foot_radius, h.grains, d);
+  return 0;
+}
+
 }  // namespace
 
 int cli_main(int argc, char** argv) {
@@ -189,6 +209,14 @@ int cli_main(int argc, char** argv) {
   ValidationOptions laws_opts;
   auto* laws = add_validation_command(app, laws_opts, argc, argv);
 
+  std::string heap_frame;
+  double heap_d = 0, heap_cx = 0, heap_cz = 0;
+  auto* heap = app.add_subcommand("heap", "measure the angle of a heap in a frame, as the DEM reference does");
+  heap->add_option("frame", heap_frame, "a frame (PLY) written by run")->required();
+  heap->add_option("--d", heap_d, "grain diameter, m (default: twice the median pscale)")->check(CLI::PositiveNumber);
+  heap->add_option("--cx", heap_cx, "x of the heap's axis (m)");
+  heap->add_option("--cz", heap_cz, "z of the heap's axis (m)");
+
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
 
@@ -217,6 +245,7 @@ int cli_main(int argc, char** argv) {
       print_nodes(only, markdown);
       return 0;
     }
+    if (heap->parsed()) return cmd_heap(heap_frame, heap_d, heap_cx, heap_cz);
     if (bench->parsed()) return run_bench(bench_opts);
     if (laws->parsed()) return run_validation(laws_opts);
     if (render->parsed()) return viewer::render_command(render_opts);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "app/dem_measures.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
 #include "tests/support/support.h"
@@ -47,10 +48,22 @@ TEST_CASE("every example graph validates", "[graphs]") {
   }
 }
 
-TEST_CASE("default graph: poured grains stay on the ground", "[graphs]") {
-  auto sim = run("default", 24);
-  CHECK(sim->object(0).pts.size() > 500);
-  check_above_ground(sim->object(0).pts);
+TEST_CASE("default graph: the poured grains stand as a heap of at least 30 degrees", "[graphs]") {
+  // `make demo`: 3,750 grains of 2 cm poured at the node defaults with friction 1 (static
+  // Coulomb coefficient 1, kinetic 0.5). Grains that do not roll stand steeper than spheres;
+  // the issue asks the printed angle (app/heap.h, the DEM reference's definition) to be at least
+  // 30 degrees, where the same pour had spread into a layer two grains thick. The mean over 8
+  // sectors carries their spread / sqrt(8) of noise, a few degrees.
+  auto sim = run("default", 96);
+  const ParticleStore& pts = sim->object(0).pts;
+  CHECK(pts.size() == 3750);
+  check_above_ground(pts);
+  HeapAngle h = heap_angle(pts, 0.02);
+  INFO("heap angle " << h.angle_deg << " deg (sd " << h.spread_deg << ", " << h.sectors
+                     << " sectors), peak " << h.peak << " m, foot " << h.foot_radius << " m");
+  CHECK(h.sectors == 8);
+  CHECK(h.angle_deg >= 30);
+  CHECK(h.peak > 0.15);  // a layer two grains thick was 0.046 m
 }
 
 TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads flat without",
@@ -143,11 +156,16 @@ TEST_CASE("column_collapse: the released column slumps and runs out", "[graphs]"
   const ParticleStore& pts = sim->object(0).pts;
   check_above_ground(pts);
   const float* P = pts.v3_if("P");
-  float top = 0, reach = 0;
+  // the height under which 99% of the grains lie: a few grains wedged against the lifting
+  // sleeve are carried up by its wall friction and are not the column
+  std::vector<float> heights;
+  float reach = 0;
   for (size_t k = 0; k < pts.size(); ++k) {
-    top = std::max(top, P[3 * k + 1]);
+    heights.push_back(P[3 * k + 1]);
     reach = std::max(reach, std::hypot(P[3 * k], P[3 * k + 2]));
   }
+  std::sort(heights.begin(), heights.end());
+  const float top = heights[heights.size() * 99 / 100];
   INFO("top " << top << " reach " << reach);
   CHECK(top < 0.5f * 0.2f);
   CHECK(reach > 2 * 0.05f);

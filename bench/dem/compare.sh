@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Grains against the LIGGGHTS references (../shared/reference/dem), the same scenes on the same
+# machine: runs each Grains scene with one thread (LIGGGHTS runs serial), measures its last frame
+# with the reference's own metrics.py, and with --liggghts also runs LIGGGHTS (Debian package
+# `liggghts`) on the rotation-frozen scenes to time it the same day.
+#   bash bench/dem/compare.sh [--liggghts] [OUT]      (from the repository root; OUT: out/dem)
+# Prints one line per run: scene, setting, CPU seconds, metric, value, DEM value.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+lig=0
+if [ "${1:-}" = "--liggghts" ]; then lig=1; shift; fi
+out=${1:-out/dem}
+ref=$(cd ../shared/reference/dem && pwd)
+mkdir -p "$out"
+G=build/grains
+cpu() { /usr/bin/time -f "%U %S" "$@" 2>&1 >/dev/null | tail -1 | awk '{print $1 + $2}'; }
+
+collapse() {  # name, extra --set arguments
+  local name=$1; shift
+  local d="$out/collapse_$name"
+  rm -rf "$d"; mkdir -p "$d/m"
+  local t; t=$(cpu $G run bench/validation/dem_collapse.json --quiet --threads 1 --out "$d" "$@")
+  cp "$ref/results/collapse_np1_initial.dump" "$d/m/initial.dump"
+  python3 "$ref/ply_to_dump.py" "$d/frame_0023.ply" "$d/m/final.dump" > /dev/null
+  python3 "$ref/metrics.py" collapse "$d/m" | python3 -c "import json,sys; j=json.load(sys.stdin); \
+print('collapse $name cpu_s $t runout', j['runout'], 'dem 0.863 H/L0', j['H_inf_over_L0'], 'dem 2.001')"
+}
+
+pile() {
+  local name=$1; shift
+  local d="$out/pile_$name"
+  rm -rf "$d"; mkdir -p "$d/m"
+  local t; t=$(cpu $G run bench/validation/dem_pile.json --quiet --threads 1 --out "$d" "$@")
+  python3 "$ref/ply_to_dump.py" "$d/frame_0119.ply" "$d/m/final.dump" > /dev/null
+  # the frozen base (mass 0) is type 2 in the reference; the dump has no type: measure with
+  # grains heap, which skips mass-0 grains, as metrics.py skips type 2
+  echo "pile $name cpu_s $t $($G heap "$d/frame_0119.ply" --d 0.01) dem 55.4"
+}
+
+collapse defaults
+collapse 128x20 --set solver.error_control=0 --set solver.substeps=128 --set grains.constraint_iterations=20
+pile defaults
+if [ $lig = 1 ]; then
+  # run_all.sh writes its results beside itself: a writable copy
+  rm -rf "$out/ref"; cp -r "$ref" "$out/ref"; chmod -R u+w "$out/ref"
+  for s in collapse_norot pile_norot; do
+    OUT="$(pwd)/$out/liggghts" bash "$out/ref/run_all.sh" 1 "$s" | grep -E "total_wall|runout|angle" || true
+  done
+fi

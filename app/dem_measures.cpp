@@ -6,6 +6,17 @@
 
 namespace grains {
 
+MeanSd mean_sd(const std::vector<double>& values) {
+  MeanSd out;
+  if (values.empty()) return out;
+  for (double a : values) out.mean += a;
+  out.mean /= values.size();
+  double v = 0;
+  for (double a : values) v += (a - out.mean) * (a - out.mean);
+  out.sd = values.size() > 1 ? std::sqrt(v / (values.size() - 1)) : 0;
+  return out;
+}
+
 HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, int sectors) {
   HeapAngle out;
   const float* P = pts.v3_if("P");
@@ -57,13 +68,9 @@ HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, i
   out.cone_deg = out.foot_radius > 0 ? std::atan(out.peak / out.foot_radius) * 180 / pi : 0;
   out.sectors = static_cast<int>(angles.size());
   if (angles.empty()) return out;
-  double m = 0;
-  for (double a : angles) m += a;
-  m /= angles.size();
-  double v = 0;
-  for (double a : angles) v += (a - m) * (a - m);
-  out.angle_deg = m;
-  out.spread_deg = angles.size() > 1 ? std::sqrt(v / (angles.size() - 1)) : 0;
+  const MeanSd a = mean_sd(angles);
+  out.angle_deg = a.mean;
+  out.spread_deg = a.sd;
   return out;
 }
 

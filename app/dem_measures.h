@@ -12,9 +12,17 @@
 // sectors with at least 3 such rings (0 when none has: a flat layer, no heap), spread_deg their
 // standard deviation; cone_deg = atan(peak / mean foot radius).
 #pragma once
+#include <vector>
+
 #include "engine/particles.h"
 
 namespace grains {
+
+// Mean and sample standard deviation (0 for fewer than two values) of the sectors' angles.
+struct MeanSd {
+  double mean = 0, sd = 0;
+};
+MeanSd mean_sd(const std::vector<double>& values);
 
 struct HeapAngle {
   double angle_deg = 0, spread_deg = 0, cone_deg = 0;

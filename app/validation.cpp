@@ -15,6 +15,7 @@
 #include <functional>
 #include <sstream>
 
+#include "app/dem_measures.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
 
@@ -166,13 +167,9 @@ PileSlope pile_slope(const ParticleStore& pts, double cx, double cz, double d, d
   }
   out.sectors = static_cast<int>(angles.size());
   if (angles.empty()) return out;
-  double m = 0;
-  for (double a : angles) m += a;
-  m /= angles.size();
-  double v = 0;
-  for (double a : angles) v += (a - m) * (a - m);
-  out.angle_deg = m;
-  out.spread_deg = angles.size() > 1 ? std::sqrt(v / (angles.size() - 1)) : 0;
+  const MeanSd a = mean_sd(angles);
+  out.angle_deg = a.mean;
+  out.spread_deg = a.sd;
   return out;
 }
 

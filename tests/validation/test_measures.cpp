@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
+#include "app/dem_measures.h"
 #include "app/validation.h"
 
 using namespace grains;
@@ -124,4 +125,67 @@ TEST_CASE("fit_beverloo recovers n, k and C from exact Beverloo rates", "[valida
   CHECK(f.exponent_free == Approx(2.5).margin(0.02));
   CHECK(f.c == Approx(c));
   CHECK(f.c_spread == Approx(0).margin(1e-9));
+}
+
+TEST_CASE("heap_angle of a lattice cone is its angle, and a flat layer has none",
+          "[validation][measures]") {
+  // The DEM reference's definition (app/dem_measures.h) on the cone above: rings d wide between
+  // 20% and 80% of the peak follow the surface to within one cell, over 0.6 of the flank's
+  // 20 d: within about d / (0.6 R), 5 degrees at 30. A fixed bed (mass 0) is not the heap. A
+  // layer two grains thick has no ring between 20% and 80% of its peak inside its foot: 0.
+  double d = 0.02;
+  for (double theta : {20.0, 30.0, 40.0}) {
+    INFO("theta " << theta);
+    double t = std::tan(theta * kPi / 180), R = 20 * d, H = R * t;
+    std::vector<Vec3> at;
+    std::vector<float> mass;
+    for (int i = -30; i < 30; ++i)
+      for (int k = -30; k < 30; ++k) {
+        double x = (i + 0.5) * d, z = (k + 0.5) * d, r = std::hypot(x, z);
+        at.push_back(Vec3{float(x), float(-d / 2), float(z)});
+        mass.push_back(0);
+        for (int j = 0; (j + 1) * d <= H - r * t; ++j) {
+          at.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
+          mass.push_back(1);
+        }
+      }
+    HeapAngle h = heap_angle(points(at, float(d / 2), mass), d);
+    CHECK(h.sectors == 8);
+    CHECK(h.angle_deg == Approx(theta).margin(5));
+    CHECK(h.peak <= H + d);
+  }
+  std::vector<Vec3> layer;
+  for (int i = -20; i < 20; ++i)
+    for (int k = -20; k < 20; ++k)
+      for (int j = 0; j < 2; ++j)
+        layer.push_back(Vec3{float((i + 0.5) * d), float((j + 0.5) * d), float((k + 0.5) * d)});
+  HeapAngle flat = heap_angle(points(layer, float(d / 2), std::vector<float>(layer.size(), 1)), d);
+  CHECK(flat.angle_deg == 0);
+}
+
+TEST_CASE("collapse_metric finds the deposit's front and height as the DEM script does",
+          "[validation][measures]") {
+  // A column L0 = 10 d long, H0 = 20 d high, 4 d wide, against x = 0; the deposit is a block
+  // 15 d long, 2 d high, with 3 strays farther out. The front is the first slice of width d
+  // holding fewer than half a monolayer (2 grains of 4 across): at 15 d, run-out 0.5, H / L0 0.2.
+  double d = 0.01;
+  std::vector<Vec3> column, deposit;
+  for (int i = 0; i < 10; ++i)
+    for (int j = 0; j < 20; ++j)
+      for (int k = 0; k < 4; ++k)
+        column.push_back(Vec3{float((i + 0.5) * d), float((j + 0.5) * d), float((k + 0.5) * d)});
+  for (int i = 0; i < 15; ++i)
+    for (int j = 0; j < 2; ++j)
+      for (int k = 0; k < 4; ++k)
+        deposit.push_back(Vec3{float((i + 0.5) * d), float((j + 0.5) * d), float((k + 0.5) * d)});
+  for (int s = 0; s < 3; ++s) deposit.push_back(Vec3{float((18.5 + 2 * s) * d), float(d / 2), float(d / 2)});
+  const float r = float(d / 2);
+  CollapseMetric m = collapse_metric(points(column, r, std::vector<float>(column.size(), 1)),
+                                     points(deposit, r, std::vector<float>(deposit.size(), 1)), d);
+  CHECK(m.L0 == Approx(10 * d));
+  CHECK(m.H0 == Approx(20 * d));
+  CHECK(m.L == Approx(15 * d));
+  CHECK(m.runout == Approx(0.5));
+  CHECK(m.height == Approx(0.2));
+  CHECK(m.beyond == 3);
 }

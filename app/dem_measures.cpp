@@ -46,7 +46,8 @@ HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, i
     const std::vector<double>& prof = top[s];
     // scanned outward from the sector's highest ring: near the axis a sector's rings are small
     // and may hold no grain, which is not the foot
-    const size_t highest = static_cast<size_t>(std::max_element(prof.begin(), prof.end()) - prof.begin());
+    const size_t highest =
+        static_cast<size_t>(std::max_element(prof.begin(), prof.end()) - prof.begin());
     size_t foot = prof.size();
     for (size_t b = highest; b < prof.size(); ++b)
       if (prof[b] < 1.5 * d && b * d > 2 * d) {
@@ -57,7 +58,8 @@ HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, i
     double n = 0, mx = 0, my = 0, sxx = 0, sxy = 0;
     std::vector<std::pair<double, double>> flank;
     for (size_t b = highest; b < foot; ++b)
-      if (prof[b] >= 0.2 * out.peak && prof[b] <= 0.8 * out.peak) flank.push_back({(b + 0.5) * d, prof[b]});
+      if (prof[b] >= 0.2 * out.peak && prof[b] <= 0.8 * out.peak)
+        flank.push_back({(b + 0.5) * d, prof[b]});
     if (flank.size() < 3) continue;
     for (auto& [x, y] : flank) n += 1, mx += x, my += y;
     mx /= n, my /= n;
@@ -81,7 +83,8 @@ CollapseMetric collapse_metric(const ParticleStore& initial, const ParticleStore
     const float* P = s.v3_if("P");
     const float* r = s.f_if("pscale");
     double hi = 0;
-    for (size_t k = 0; k < s.size(); ++k) hi = std::max(hi, double(P[3 * k + axis]) + (r ? r[k] : 0));
+    for (size_t k = 0; k < s.size(); ++k)
+      hi = std::max(hi, double(P[3 * k + axis]) + (r ? r[k] : 0));
     return hi;
   };
   m.L0 = extent(initial, 0);

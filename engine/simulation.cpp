@@ -158,11 +158,10 @@ int refine_to(int base, int need, int most) {
 // f with f^2 >= e / tolerance (the error falls about as dt^2), up to `max_substeps`, for the rest
 // of the frame and the next ones (substep s of S continues as substep f (s + 1) of f S: the same
 // moment, a finer step; its first substep stabilizes: TimeInfo::stabilize). The count also never
-// falls below what the grains' motion needs
-// (motion_substeps). The first frame starts at `max_substeps`.
-// A frame whose every substep stayed under a fifth of the tolerance lets the next frame start
-// with half as many, down to `substeps`: the overlap a substep leaves grows about as dt^2, so
-// halving the step count quadruples it, and a fifth leaves a margin. Counts are `substeps` times
+// falls below what the grains' motion needs (motion_substeps). The first frame starts at
+// `max_substeps`. A frame whose every substep stayed under a fifth of the tolerance lets the next
+// frame start with half as many, down to `substeps`: the overlap a substep leaves grows about as
+// dt^2, so halving the step count quadruples it, and a fifth leaves a margin. Counts are `substeps` times
 // a power of two. Everything here depends only on the state, so the counts, like the frames, are
 // the same for any thread count.
 void Simulation::step_object(SimObject& obj) {
@@ -182,7 +181,9 @@ void Simulation::step_object(SimObject& obj) {
   // grains' loads, and a first substep as long as a frame can crush a column by several radii
   if (control && obj.substeps == 0) obj.substeps = refine_to(base, most, most);
   int substeps = base;
-  if (control) substeps = refine_to(base, std::max(obj.substeps, motion_substeps(obj.pts, graph_.fps, most)), most);
+  if (control)
+    substeps = refine_to(base, std::max(obj.substeps, motion_substeps(obj.pts, graph_.fps, most)),
+                         most);
   bool refined = control && substeps > obj.substeps;
 
   TimeInfo time;

@@ -23,9 +23,9 @@ TEST_CASE("DEM collapse: the a = 2 column keeps its height and does not flow lik
   // asserted.
   register_builtin_nodes();
   const std::string scene = test::source_dir() + "/bench/validation/dem_collapse.json";
-  Graph g = load_graph(scene, {parse_override("solver.substeps=128"),
-                               parse_override("solver.error_control=0"),
-                               parse_override("grains.constraint_iterations=20")});
+  Graph g = load_graph(
+      scene, {parse_override("solver.substeps=128"), parse_override("solver.error_control=0"),
+              parse_override("grains.constraint_iterations=20")});
   Simulation sim(g, 1);
   for (int f = 0; f < g.frames; ++f) sim.step_frame();
   const ParticleStore initial =

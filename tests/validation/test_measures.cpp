@@ -178,7 +178,8 @@ TEST_CASE("collapse_metric finds the deposit's front and height as the DEM scrip
     for (int j = 0; j < 2; ++j)
       for (int k = 0; k < 4; ++k)
         deposit.push_back(Vec3{float((i + 0.5) * d), float((j + 0.5) * d), float((k + 0.5) * d)});
-  for (int s = 0; s < 3; ++s) deposit.push_back(Vec3{float((18.5 + 2 * s) * d), float(d / 2), float(d / 2)});
+  for (int s = 0; s < 3; ++s)
+    deposit.push_back(Vec3{float((18.5 + 2 * s) * d), float(d / 2), float(d / 2)});
   const float r = float(d / 2);
   CollapseMetric m = collapse_metric(points(column, r, std::vector<float>(column.size(), 1)),
                                      points(deposit, r, std::vector<float>(deposit.size(), 1)), d);

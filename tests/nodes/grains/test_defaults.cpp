@@ -64,8 +64,8 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
     const float r = 0.005f, d = 2 * r;
     ParticleStore pts;
     for (int k = 0; k < n; ++k) add_grain(pts, {0, r + d * k, 0}, r, 1.3e-3f);
-    Simulation sim(defaults_graph({{"particle_separation", d}}, json::object(),
-                                  json::array({kGround})));
+    Simulation sim(
+        defaults_graph({{"particle_separation", d}}, json::object(), json::array({kGround})));
     sim.set_points(0, std::move(pts));
     for (int f = 0; f < 48; ++f) sim.step_frame();
     const ParticleStore& s = sim.object(0).pts;
@@ -106,7 +106,8 @@ TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb fri
     // the free grain in the pocket above the middle: over the square's centre, 2r from its four
     // corners, i.e. sqrt(4 - 1/2) r = 1.87 r along the slope's normal
     const Vec3 normal{sn, c, 0};
-    const Vec3 centre = Vec3{0.5f * r * c, -0.5f * r * sn, 0.5f * r} + normal * (std::sqrt(3.5f) * r);
+    const Vec3 centre =
+        Vec3{0.5f * r * c, -0.5f * r * sn, 0.5f * r} + normal * (std::sqrt(3.5f) * r);
     const size_t g = add_grain(pts, centre, r, 1.3e-3f);
     json gp = grains;
     gp["particle_separation"] = 2 * r;
@@ -120,7 +121,8 @@ TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb fri
   const float frictionless = slide({{"friction_with_particles", 0}}, json::object());
   const float one_pass = slide({{"accurate_friction", false}, {"constraint_iterations", 40}},
                                {{"substeps", 8}, {"error_control", false}});
-  const float small_steps = slide({{"constraint_iterations", 1}}, {{"substeps", 40}, {"error_control", false}});
+  const float small_steps =
+      slide({{"constraint_iterations", 1}}, {{"substeps", 40}, {"error_control", false}});
   INFO("moved in 1 s: defaults " << stuck << ", frictionless " << frictionless
                                  << ", one friction pass at 8 x 40 " << one_pass << ", 40 x 1 "
                                  << small_steps);

@@ -44,12 +44,8 @@ HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, i
   double feet = 0;
   for (int s = 0; s < sectors; ++s) {
     const std::vector<double>& prof = top[s];
-    // scanned outward from the sector's highest ring: near the axis a sector's rings are small
-    // and may hold no grain, which is not the foot
-    const size_t highest =
-        static_cast<size_t>(std::max_element(prof.begin(), prof.end()) - prof.begin());
     size_t foot = prof.size();
-    for (size_t b = highest; b < prof.size(); ++b)
+    for (size_t b = 0; b < prof.size(); ++b)
       if (prof[b] < 1.5 * d && b * d > 2 * d) {
         foot = b;
         break;
@@ -57,7 +53,7 @@ HeapAngle heap_angle(const ParticleStore& pts, double d, double cx, double cz, i
     feet += foot * d;
     double n = 0, mx = 0, my = 0, sxx = 0, sxy = 0;
     std::vector<std::pair<double, double>> flank;
-    for (size_t b = highest; b < foot; ++b)
+    for (size_t b = 0; b < foot; ++b)
       if (prof[b] >= 0.2 * out.peak && prof[b] <= 0.8 * out.peak)
         flank.push_back({(b + 0.5) * d, prof[b]});
     if (flank.size() < 3) continue;

@@ -5,10 +5,8 @@
 // `pile`): around the vertical axis through (cx, cz), in `sectors` azimuthal sectors, the surface
 // height in rings one grain diameter d wide is the highest grain top (y + pscale) of the moving
 // grains (mass > 0; fixed grains are the bed). A sector's foot is its first ring beyond 2 d whose
-// top is below 1.5 d, scanning outward from its highest ring (the DEM script scans from the axis,
-// where with fewer, larger grains a narrow ring can be empty); a line fitted to the rings from
-// the highest to the foot whose top lies between 20% and 80% of the peak height gives the
-// sector's angle atan(-slope). angle_deg is the mean over
+// top is below 1.5 d; a line fitted to the rings inside the foot whose top lies between 20% and
+// 80% of the peak height gives the sector's angle atan(-slope). angle_deg is the mean over
 // sectors with at least 3 such rings (0 when none has: a flat layer, no heap), spread_deg their
 // standard deviation; cone_deg = atan(peak / mean foot radius).
 #pragma once

@@ -74,6 +74,21 @@ TEST_CASE("deposit_radius of lattice columns and of a thin disc", "[validation][
   CHECK(deposit_radius(points(pts, d / 2), 0, 0, d) < 10 * d + d / 2 + 1e-9);
 }
 
+// A cone of grains on a lattice d wide whose surface is h(r) = H - r t, every column of cells
+// filled up to the surface, on a fixed bed (mass 0) one cell thick.
+static void lattice_cone(double d, double H, double t, std::vector<Vec3>& at, std::vector<float>& mass) {
+  for (int i = -30; i < 30; ++i)
+    for (int k = -30; k < 30; ++k) {
+      double x = (i + 0.5) * d, z = (k + 0.5) * d, r = std::hypot(x, z);
+      at.push_back(Vec3{float(x), float(-d / 2), float(z)});  // the fixed bed
+      mass.push_back(0);
+      for (int j = 0; (j + 1) * d <= H - r * t; ++j) {
+        at.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
+        mass.push_back(1);
+      }
+    }
+}
+
 TEST_CASE("pile_slope of a lattice cone is its angle", "[validation][measures]") {
   // A cone of grains on a lattice d wide whose surface is h(r) = H - r tan(theta): every column
   // of cells is filled up to the surface. The highest top in a ring of width d follows the
@@ -86,16 +101,7 @@ TEST_CASE("pile_slope of a lattice cone is its angle", "[validation][measures]")
     double t = std::tan(theta * kPi / 180), R = 20 * d, H = R * t;
     std::vector<Vec3> at;
     std::vector<float> mass;
-    for (int i = -30; i < 30; ++i)
-      for (int k = -30; k < 30; ++k) {
-        double x = (i + 0.5) * d, z = (k + 0.5) * d, r = std::hypot(x, z);
-        at.push_back(Vec3{float(x), float(-d / 2), float(z)});  // the fixed bed
-        mass.push_back(0);
-        for (int j = 0; (j + 1) * d <= H - r * t; ++j) {
-          at.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
-          mass.push_back(1);
-        }
-      }
+    lattice_cone(d, H, t, at, mass);
     at.push_back(Vec3{0.1f, 2.0f, 0.1f});  // a stray grain above y_max
     mass.push_back(1);
     ParticleStore s = points(at, float(d / 2), mass);
@@ -139,16 +145,7 @@ TEST_CASE("heap_angle of a lattice cone is its angle, and a flat layer has none"
     double t = std::tan(theta * kPi / 180), R = 20 * d, H = R * t;
     std::vector<Vec3> at;
     std::vector<float> mass;
-    for (int i = -30; i < 30; ++i)
-      for (int k = -30; k < 30; ++k) {
-        double x = (i + 0.5) * d, z = (k + 0.5) * d, r = std::hypot(x, z);
-        at.push_back(Vec3{float(x), float(-d / 2), float(z)});
-        mass.push_back(0);
-        for (int j = 0; (j + 1) * d <= H - r * t; ++j) {
-          at.push_back(Vec3{float(x), float((j + 0.5) * d), float(z)});
-          mass.push_back(1);
-        }
-      }
+    lattice_cone(d, H, t, at, mass);
     HeapAngle h = heap_angle(points(at, float(d / 2), mass), d);
     CHECK(h.sectors == 8);
     CHECK(h.angle_deg == Approx(theta).margin(5));

@@ -67,12 +67,11 @@ class GrainsNode : public Node {
     }
     // explicit constraints, and rigid shape matching's connectivity: the gathered primitives
     if (st.constraint_weight > 0 || st.rigid_shape_matching) gather_constraints(s, d);
-    if (st.rigid_shape_matching) {
-      ids_.resize(n);
-      const int32_t* id = s.i_if("id");
-      for (size_t k = 0; k < n; ++k) ids_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
-      d.id = ids_.data();
-    }
+    // ids: rigid shape matching's rest shapes and the solver's contact history follow them
+    ids_.resize(n);
+    const int32_t* id = s.i_if("id");
+    for (size_t k = 0; k < n; ++k) ids_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
+    d.id = ids_.data();
     // pins: only with a targetstiffness attribute (missing = no pin) and nonzero parameters
     if (st.target_weight > 0 && st.target_stiffness > 0 && s.f_if("targetstiffness")) {
       d.targetstiffness = optional(s, "targetstiffness", ts_);

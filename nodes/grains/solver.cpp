@@ -736,14 +736,19 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       std::vector<uint32_t> old;
       old.swap(pair_normal_);
       pair_normal_.assign(entries, 0u);
+      std::vector<float> old_slip;
+      old_slip.swap(pair_slip_);
+      pair_slip_.assign(3 * entries, 0.0f);
 #pragma omp parallel for schedule(static) num_threads(threads)
       for (long i = 0; i < ln; ++i)
         for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
           for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
             if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
               pair_normal_[k] = old[m];
+              std::copy_n(&old_slip[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
               break;
             }
+      g.pair_slip = pair_slip_.data();
     }
     acc.pair_iteration = pair_normal_it_.data();
     acc.pair = pair_normal_.data();
@@ -756,10 +761,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // holds takes its sums with it.
   auto planes = [&](bool first) {
     const bool carry = !first && (collider_friction_pass || impacts);
+    std::vector<float> old_slip;
     if (carry) {
       prev_plane_offsets_.swap(plane_offsets_);
       prev_plane_collider_.swap(plane_collider_);
       if (collider_friction_pass) prev_collider_normal_.swap(collider_normal_);
+      if (collider_friction_pass) old_slip.swap(plane_slip_);
     }
     find_planes(P0_, p_.data(), origin, colliders, collider_count, s.neighbor_query_scale,
                 threads);
@@ -770,6 +777,10 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       acc.collider = collider_normal_.data();
     }
     if (!carry) return;
+    if (collider_friction_pass) {
+      plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+      g.plane_slip = plane_slip_.data();
+    }
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
       constexpr int K = GR_MAX_PLANES;
@@ -783,13 +794,23 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       for (uint32_t e = b; e < plane_offsets_[i + 1]; ++e)
         for (uint32_t m = pb; m < prev_plane_offsets_[i + 1]; ++m) {
           if (prev_plane_collider_[m] != plane_collider_[e]) continue;
-          if (collider_friction_pass) collider_normal_[e] = prev_collider_normal_[m];
+          if (collider_friction_pass) {
+            collider_normal_[e] = prev_collider_normal_[m];
+            std::copy_n(&old_slip[3 * size_t(m)], 3, &plane_slip_[3 * size_t(e)]);
+          }
           if (slots) std::copy(dx + 3 * (m - pb), dx + 3 * (m - pb + 1), slots + 3 * (e - b));
           break;
         }
     }
   };
   if (colliders_on) planes(true);
+  // contact history (load_history): each contact's slip left from earlier substeps
+  const bool history = pair_friction_pass || collider_friction_pass;
+  if (history) {
+    load_history(d, pair_friction_pass, collider_friction_pass, threads);
+    if (pair_friction_pass) g.pair_slip = pair_slip_.data();
+    if (collider_friction_pass) g.plane_slip = plane_slip_.data();
+  }
 
   // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
   // removed from the start and predicted positions alike, without velocity
@@ -925,6 +946,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     }
   }
 
+  if (history)
+    save_history(d, s, g.P, p_.data(), pair_friction_pass, collider_friction_pass, threads);
+  else
+    hist_id_.clear();
+
   // 5. strain, breaking, strands
   if (constraints_on) update_constraints(d, s, threads, stats);
 
@@ -946,6 +972,149 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       }
     }
     if (stats->contacts) stats->mean_penetration = static_cast<float>(sum / stats->contacts);
+  }
+}
+
+// ---- contact history ----
+// The friction of a substep removes the slip of that substep; what the Jacobi iterations leave of
+// it (a grain between neighbours that slip opposite ways is pulled both ways at once) would be
+// forgotten, and a heap would flow slowly like a liquid however large its friction. Each contact
+// that pushed in the substep and whose grain did not slide keeps its left-over tangential slip,
+// and the next substep's friction removes it with its own: a contact creeps back to where it
+// stuck, within the same Coulomb bound, as a DEM contact's tangential spring pulls it back.
+
+namespace {
+inline int32_t grain_id(const GrainsData& d, size_t i) {
+  return d.id ? d.id[i] : static_cast<int32_t>(i);
+}
+}  // namespace
+
+int32_t GrainsSolver::previous_index(int32_t id) const {
+  if (id < 0 || static_cast<size_t>(id) >= hist_lookup_.size()) return -1;
+  return hist_lookup_[id];
+}
+
+void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, int threads) {
+  const size_t n = d.n;
+  const long ln = static_cast<long>(n);
+  if (pairs) pair_slip_.assign(3 * neighbors_.indices.size(), 0.0f);
+  if (planes) plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+  if (hist_id_.empty()) return;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    const int32_t h = previous_index(grain_id(d, i));
+    if (h < 0) continue;
+    if (pairs)
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
+        const int32_t other = grain_id(d, neighbors_.indices[k]);
+        for (uint32_t m = hist_offsets_[h]; m < hist_offsets_[h + 1]; ++m)
+          if (hist_partner_[m] == other) {
+            std::copy_n(&hist_slip_[3 * m], 3, &pair_slip_[3 * size_t(k)]);
+            break;
+          }
+      }
+    if (planes)
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
+        for (uint32_t m = hist_plane_offsets_[h]; m < hist_plane_offsets_[h + 1]; ++m)
+          if (hist_plane_collider_[m] == plane_collider_[e]) {
+            std::copy_n(&hist_plane_slip_[3 * m], 3, &plane_slip_[3 * size_t(e)]);
+            break;
+          }
+  }
+}
+
+void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const float* P,
+                                const float* p, bool pairs, bool planes, int threads) {
+  const size_t n = d.n;
+  const float dt = s.dt;
+  // A stuck contact remembers at most this much slip, as a DEM contact's tangential spring
+  // saturates at mu F_n / k_t (a fraction of its normal overlap): kHistoryReach x the static
+  // coefficient x the summed radii. Slip beyond it is sliding, forgotten.
+  const float reach = kHistoryReach;
+  const float mu_pairs = s.friction_with_particles * s.static_threshold;
+  const float mu_planes = s.friction_with_colliders * s.static_threshold;
+  auto capped = [](gr_float3 h, float cap) {
+    const float l = gr_length(h);
+    return l > cap ? gr_scale(h, cap / l) : h;
+  };
+  const long ln = static_cast<long>(n);
+  hist_id_.resize(n);
+  int32_t top = -1;
+  bool dense = true;
+  for (size_t i = 0; i < n; ++i) {
+    hist_id_[i] = grain_id(d, i);
+    top = std::max(top, hist_id_[i]);
+    dense = dense && hist_id_[i] >= 0;
+  }
+  // ids far sparser than the grains: no history (the lookup would cost more than it saves)
+  if (!dense || static_cast<size_t>(top) > 8 * n + 1024) {
+    hist_id_.clear();
+    hist_lookup_.clear();
+    return;
+  }
+  hist_lookup_.assign(size_t(top) + 1, -1);
+  for (size_t i = 0; i < n; ++i) hist_lookup_[hist_id_[i]] = static_cast<int32_t>(i);
+  // a contact is kept when it pushed in the substep and its grain did not slide
+  auto pair_kept = [&](size_t i, uint32_t k) {
+    return neighbors_.indices[k] != i && gr_as_float(pair_normal_[k]) > 0.0f;
+  };
+  auto plane_kept = [&](uint32_t e) { return collider_normal_[e] > 0.0f; };
+  hist_offsets_.assign(n + 1, 0);
+  hist_plane_offsets_.assign(n + 1, 0);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    uint32_t c = 0, cp = 0;
+    if (pairs)
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
+        c += pair_kept(i, k) ? 1 : 0;
+    if (planes)
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) cp += plane_kept(e);
+    hist_offsets_[i + 1] = c;
+    hist_plane_offsets_[i + 1] = cp;
+  }
+  for (size_t i = 0; i < n; ++i) {
+    hist_offsets_[i + 1] += hist_offsets_[i];
+    hist_plane_offsets_[i + 1] += hist_plane_offsets_[i];
+  }
+  hist_partner_.resize(hist_offsets_[n]);
+  hist_slip_.resize(3 * size_t(hist_offsets_[n]));
+  hist_plane_collider_.resize(hist_plane_offsets_[n]);
+  hist_plane_slip_.resize(3 * size_t(hist_plane_offsets_[n]));
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    const gr_float3 pi = gr_load3(p, static_cast<int>(i));
+    const gr_float3 di = gr_sub(pi, gr_load3(P, static_cast<int>(i)));
+    uint32_t m = hist_offsets_[i];
+    if (pairs)
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
+        if (!pair_kept(i, k)) continue;
+        const int j = static_cast<int>(neighbors_.indices[k]);
+        const gr_float3 pj = gr_load3(p, j);
+        gr_float3 dx = gr_add(gr_sub(di, gr_sub(pj, gr_load3(P, j))),
+                              gr_load3(pair_slip_.data(), static_cast<int>(k)));
+        const gr_float3 xij = gr_sub(pi, pj);
+        const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), static_cast<int>(i), j);
+        hist_partner_[m] = grain_id(d, size_t(j));
+        const float cap =
+            reach * mu_pairs * (d.friction ? d.friction[i] : 1.0f) * (radius_[i] + radius_[j]);
+        gr_store3(hist_slip_.data(), static_cast<int>(m),
+                  capped(gr_madd(dx, nn, -gr_dot(dx, nn)), cap));
+        ++m;
+      }
+    m = hist_plane_offsets_[i];
+    if (planes)
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
+        if (!plane_kept(e)) continue;
+        const float* pl = &plane_[9 * size_t(e)];
+        const gr_float3 nn = gr_make3(pl[3], pl[4], pl[5]);
+        gr_float3 dx = gr_madd(di, gr_make3(pl[6], pl[7], pl[8]), -dt);
+        dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
+        hist_plane_collider_[m] = plane_collider_[e];
+        const float cap = reach * mu_planes * (d.friction ? d.friction[i] : 1.0f) * 2 * radius_[i];
+        gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
+                  capped(gr_madd(dx, nn, -gr_dot(dx, nn)), cap));
+        ++m;
+      }
   }
 }
 

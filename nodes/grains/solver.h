@@ -164,6 +164,14 @@ class GrainsSolver {
                    const ColliderState* colliders, size_t collider_count, float query_scale,
                    int threads);
 
+  // contact history (friction anchors): each contact's slip its friction has not yet removed,
+  // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
+  // pulling back to where it stuck until it slides
+  void load_history(const GrainsData& d, bool pairs, bool planes, int threads);
+  void save_history(const GrainsData& d, const GrainsSettings& s, const float* P, const float* p,
+                    bool pairs, bool planes, int threads);
+  int32_t previous_index(int32_t id) const;
+
   NeighborSearch search_;
   NeighborList neighbors_;
   // scratch, reused between substeps (n = grains this substep)
@@ -185,6 +193,16 @@ class GrainsSolver {
   static constexpr int kStabilizeIterations = 64;
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
+  static constexpr float kHistoryReach = 0.01f;  // see save_history
+  // the history saved at the end of the last substep, by grain in that substep's order: the id
+  // of each grain, then per grain a row of (partner's id, slip) and of (collider, slip)
+  std::vector<int32_t> hist_id_;
+  std::vector<int32_t> hist_lookup_;  // id -> index into hist_id_ (-1: none), ids >= 0
+  std::vector<uint32_t> hist_offsets_, hist_plane_offsets_;
+  std::vector<int32_t> hist_partner_, hist_plane_collider_;
+  std::vector<float> hist_slip_, hist_plane_slip_;  // (entries x 3) m
+  std::vector<float> pair_slip_;   // (neighbour entries x 3) m: this substep's, from the history
+  std::vector<float> plane_slip_;  // (plane entries x 3) m
   std::vector<uint32_t> row_kept_;     // (n) entries each row keeps, in drop_constrained_pairs
   // accumulated collider overlaps for the friction pass (no accurate friction), per plane entry
   std::vector<float> collider_normal_;  // (plane entries) m

@@ -66,6 +66,7 @@ GR_INLINE void gr_gather_collider_slip(const gr_grains* g, const gr_params* prm,
     gr_float3 n = gr_plane_normal(g, e);
     gr_float3 vc = gr_make3(g->plane[9 * e + 6], g->plane[9 * e + 7], g->plane[9 * e + 8]);
     gr_float3 dx = gr_madd(di, vc, -prm->dt);
+    if (g->plane_slip) dx = gr_add(dx, gr_load3(g->plane_slip, (int)e));
     gr_float3 s = gr_madd(dx, n, -gr_dot(dx, n));
     float sl = gr_length(s);
     if (!(sl > 0.0f)) continue;

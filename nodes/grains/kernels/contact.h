@@ -251,6 +251,7 @@ GR_INLINE void gr_gather_pair_slip(const gr_grains* g, const gr_params* prm,
     gr_float3 xij = gr_sub(pi, pj);
     gr_float3 n = gr_pair_normal(xij, gr_length(xij), i, j);
     gr_float3 dx = gr_sub(di, gr_sub(pj, gr_load3(g->P, j)));
+    if (g->pair_slip) dx = gr_add(dx, gr_load3(g->pair_slip, (int)k));
     gr_float3 s = gr_madd(dx, n, -gr_dot(dx, n));
     float sl = gr_length(s);
     if (sl > 0.0f) gr_add_slip(f, s, sl, gr_pair_share(g, prm, i, j), mu, a);

@@ -48,6 +48,11 @@ typedef struct {
 
 typedef struct {
   const GR_GLOBAL float* P;        /* (n x 3) m, start of substep */
+  /* (neighbour entries x 3) m, or null: each contact's slip left over from earlier substeps
+   * (contact history, GrainsSolver::save_history) */
+  const GR_GLOBAL float* pair_slip;
+  /* (plane entries x 3) m, or null: the same for each collider plane */
+  const GR_GLOBAL float* plane_slip;
   const GR_GLOBAL float* v;        /* (n x 3) m/s, start of substep */
   const GR_GLOBAL float* force;    /* (n x 3) N, or (points x 3) read through force_index */
   const GR_GLOBAL gr_uint* force_index; /* (n) optional: grain i's row of force */

@@ -12,20 +12,15 @@
 
 using namespace grains;
 
-TEST_CASE("DEM collapse: the a = 2 column keeps its height and does not flow like a liquid",
+TEST_CASE("DEM collapse: at the defaults the a = 2 column runs out as DEM's within 10%",
           "[validation][dem]") {
-  // At 128 substeps x 20 iterations (error control off, so the setting is the test's) the
-  // column must keep H / L0 within 2% of DEM's 2.00 (DEM's own spread: dt halved or doubled,
-  // another packing, +-2%), and its toe may not run out farther than DEM's 0.86 plus 10%: the
-  // default PBD material had crushed it to a layer (H / L0 0.07) and run it out 3.1 L0, and 2 x 40
-  // ran it out 7.2 L0. Converged rigid grains with Coulomb friction keep the toe shorter than
-  // DEM's soft contacts do (0.20 measured; VALIDATION.md, BENCHMARKS.md), which is reported, not
-  // asserted.
+  // At the node and solver defaults (error control on) the run-out and H / L0 must lie within
+  // 10% of the frozen-rotation DEM's 0.863 and 2.00 (the issue's figure; DEM's own spread with dt
+  // halved or doubled or another packing is +-2%). The default PBD material had crushed the
+  // column to a layer (H / L0 0.07) and run it out 3.1 L0; 2 x 40 ran it out 7.2 L0.
   register_builtin_nodes();
   const std::string scene = test::source_dir() + "/bench/validation/dem_collapse.json";
-  Graph g = load_graph(
-      scene, {parse_override("solver.substeps=128"), parse_override("solver.error_control=0"),
-              parse_override("grains.constraint_iterations=20")});
+  Graph g = load_graph(scene);
   Simulation sim(g, 1);
   for (int f = 0; f < g.frames; ++f) sim.step_frame();
   const ParticleStore initial =
@@ -36,7 +31,6 @@ TEST_CASE("DEM collapse: the a = 2 column keeps its height and does not flow lik
   CollapseMetric m = collapse_metric(initial, fin, 0.01);
   INFO("run-out " << m.runout << " (DEM 0.86), H / L0 " << m.height << " (DEM 2.00), " << m.beyond
                   << " grains past the front");
-  CHECK(std::fabs(m.height - 2.00) <= 0.02 * 2.00);
-  CHECK(m.runout <= 0.86 * 1.1);
-  CHECK(m.runout >= 0);
+  CHECK(std::fabs(m.height - 2.001) <= 0.1 * 2.001);
+  CHECK(std::fabs(m.runout - 0.863) <= 0.1 * 0.863);
 }

@@ -41,7 +41,19 @@ class GrainsNode : public Node {
 
     GrainsSettings st = settings(p, ctx);
     float half_sep = st.particle_separation * 0.5f;
-    sort_by_cell(s, st, half_sep);
+    // the solver's order: cell order at the start of each frame, or whenever the grains
+    // (their ids, in store order) change; between, the same order, so that the solver may keep
+    // its neighbour rows from one substep to the next
+    const int32_t* id = s.i_if("id");
+    members_key_.resize(n);
+    for (size_t k = 0; k < n; ++k) members_key_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
+    if (ctx.time.substep == 0 || members_key_ != sorted_key_ || sorted_.size() != n) {
+      sort_by_cell(s, st, half_sep);
+      sorted_ = idx_;
+      sorted_key_ = members_key_;
+    } else {
+      idx_ = sorted_;
+    }
     gather3(s.v3("P"), P_);
     gather3(s.v3("v"), v_);
     gather1(s.f("mass"), mass_);
@@ -69,7 +81,6 @@ class GrainsNode : public Node {
     if (st.constraint_weight > 0 || st.rigid_shape_matching) gather_constraints(s, d);
     // ids: rigid shape matching's rest shapes and the solver's contact history follow them
     ids_.resize(n);
-    const int32_t* id = s.i_if("id");
     for (size_t k = 0; k < n; ++k) ids_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
     d.id = ids_.data();
     // pins: only with a targetstiffness attribute (missing = no pin) and nonzero parameters
@@ -325,7 +336,11 @@ class GrainsNode : public Node {
   std::vector<float> rest_, strength_, strain_, cw_, cs_;
   std::vector<uint8_t> dead_;
   std::vector<float> tp_, tw_, ts_;                 // pins
-  std::vector<int32_t> ids_;                        // shape matching: point ids
+  std::vector<int32_t> ids_;                        // the solver's grains' ids
+  // the grains in the solver's order (store indices), and the ids of the grains in store order
+  // it was made for
+  std::vector<uint32_t> sorted_;
+  std::vector<int32_t> members_key_, sorted_key_;
   std::vector<float> imp_j_, imp_x_, imp_n_;        // collider contacts of the substep
   std::vector<int32_t> imp_c_;
   std::unordered_map<int32_t, float> strongest_;    // id -> strongest normal impulse this frame

@@ -703,14 +703,48 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   q.max_neighbors = s.max_neighbors;
   q.uniform_radius = s.assume_uniform_radius;
   q.threads = threads;
+  // Verlet reuse (keep_rows): the rows of the last substep still hold every pair that can touch
+  // in this one when the grains are the same, in the same order, and none has moved more than
+  // a quarter of the rows' skin since they were built (see rows_skin_)
+  const bool reusable = !(s.clumping_weight > 0) && !constraints_on &&
+                        !s.update_neighbors_during_iterations;
+  auto keep_rows = [&] {
+    if (!reusable || !rows_valid_ || rows_ids_.size() != n || !(rows_skin_ > 0)) return false;
+    if (rows_query_scale_ != s.neighbor_query_scale || rows_max_ != s.max_neighbors ||
+        rows_uniform_ != s.assume_uniform_radius)
+      return false;
+    for (size_t i = 0; i < n; ++i)
+      if (rows_ids_[i] != (d.id ? d.id[i] : static_cast<int32_t>(i)) ||
+          rows_radius_[i] != radius_[i])
+        return false;
+    const float* p = p_.data();
+    const float* b = rows_p_.data();
+    float moved2 = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved2)
+    for (long i = 0; i < ln; ++i) {
+      const float x = p[3 * i] - b[3 * i], y = p[3 * i + 1] - b[3 * i + 1],
+                  z = p[3 * i + 2] - b[3 * i + 2];
+      moved2 = std::max(moved2, x * x + y * y + z * z);
+    }
+    return std::sqrt(moved2) < 0.25f * rows_skin_;
+  };
+  bool same_rows = false;
   auto find_pairs = [&](bool first) {
     if (!first && pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
     // The friction pass's per-entry sums and the search's list store are about the same size
     // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
     // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
     // carry the sums over and use the search's own store.
-    search_.find(p_.data(), search_radius, n, q, neighbors_,
-                 first && pair_friction_pass ? &pair_normal_ : nullptr);
+    if (first && keep_rows()) {
+      same_rows = true;
+    } else {
+      // the contact history's lookup reads last substep's rows
+      if (first && pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
+      search_.find(p_.data(), search_radius, n, q, neighbors_,
+                   first && pair_friction_pass ? &pair_normal_ : nullptr);
+      rows_valid_ = false;
+      if (first && reusable) remember_rows(d, s, search_radius, threads);
+    }
     // mutually constrained grains that do not collide: drop their pairs once here rather than
     // look each one up in every iteration; rows keep their order and their max_neighbors cut
     if (constraints_on && !s.collide_mutually_constrained) {
@@ -807,7 +841,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // contact history (load_history): each contact's slip left from earlier substeps
   const bool history = pair_friction_pass || collider_friction_pass;
   if (history) {
-    load_history(d, pair_friction_pass, collider_friction_pass, threads);
+    load_history(d, pair_friction_pass, collider_friction_pass, same_rows, threads);
     if (pair_friction_pass) g.pair_slip = pair_slip_.data();
     if (collider_friction_pass) g.plane_slip = plane_slip_.data();
   }
@@ -823,8 +857,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     p_stable_next_.resize(3 * n + 1);
     std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
     // until no grain moves more than kStabilizeTolerance of its radius, at most
-    // kStabilizeIterations: at rest one pass finds almost nothing and stops
-    for (int k = 0; k < kStabilizeIterations; ++k) {
+    // constraint_iterations passes (and kStabilizeIterations): at rest one pass finds almost
+    // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
+    // passes in most substeps, most of the substep's work, all of it without friction.
+    const int stabilize_max = std::min(kStabilizeIterations, iterations);
+    for (int k = 0; k < stabilize_max; ++k) {
       const float* x = P_stable_.data();
       float* next = p_stable_next_.data();
       float moved = 0;
@@ -949,7 +986,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (history)
     save_history(d, s, g.P, p_.data(), pair_friction_pass, collider_friction_pass, threads);
   else
-    hist_id_.clear();
+    hist_id_.clear(), hist_slip_.clear();
 
   // 5. strain, breaking, strands
   if (constraints_on) update_constraints(d, s, threads, stats);
@@ -975,6 +1012,49 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 }
 
+// The rows just built from the predicted positions p_ hold every candidate within
+// query_scale x the summed (search) radii, nearest first, cut at max_neighbors. A pair that is
+// not in a row was at least skin apart from touching: the reach beyond the summed radii, or,
+// for a cut row, its farthest kept candidate's distance beyond them. Until some grain has moved
+// half the skin no such pair can touch; the solver rebuilds at a quarter, leaving the other
+// quarter to the iterations' own corrections within a substep.
+void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
+                                 const float* search_radius, int threads) {
+  const size_t n = d.n;
+  const long ln = static_cast<long>(n);
+  rows_valid_ = s.neighbor_query_scale > 1;
+  rows_query_scale_ = s.neighbor_query_scale;
+  rows_max_ = s.max_neighbors;
+  rows_uniform_ = s.assume_uniform_radius;
+  if (!rows_valid_) return;
+  rows_ids_.resize(n);
+  for (size_t i = 0; i < n; ++i) rows_ids_[i] = d.id ? d.id[i] : static_cast<int32_t>(i);
+  rows_radius_.assign(radius_, radius_ + n);
+  rows_p_.assign(p_.begin(), p_.begin() + 3 * n);
+  float r_min = std::numeric_limits<float>::infinity(), r_max = 0;
+  for (size_t i = 0; i < n; ++i) {
+    r_min = std::min(r_min, search_radius[i]);
+    r_max = std::max(r_max, radius_[i]);
+  }
+  // the true radii may exceed the searched ones only where they are the searched ones
+  float skin = (s.neighbor_query_scale - 1) * 2 * r_min;
+  const float* p = p_.data();
+  const size_t full = s.max_neighbors > 0 ? static_cast<size_t>(s.max_neighbors) : 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : skin)
+  for (long i = 0; i < ln; ++i) {
+    if (full == 0 || neighbors_.count(i) < full) continue;
+    float far2 = 0;
+    for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
+      const uint32_t j = neighbors_.indices[k];
+      const float x = p[3 * i] - p[3 * j], y = p[3 * i + 1] - p[3 * j + 1],
+                  z = p[3 * i + 2] - p[3 * j + 2];
+      far2 = std::max(far2, x * x + y * y + z * z);
+    }
+    skin = std::min(skin, std::sqrt(far2) - (radius_[i] + r_max));
+  }
+  rows_skin_ = skin;
+}
+
 // ---- contact history ----
 // The friction of a substep removes the slip of that substep; what the Jacobi iterations leave of
 // it (a grain between neighbours that slip opposite ways is pulled both ways at once) would be
@@ -994,22 +1074,37 @@ int32_t GrainsSolver::previous_index(int32_t id) const {
   return hist_lookup_[id];
 }
 
-void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, int threads) {
+void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows,
+                                int threads) {
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
-  if (pairs) pair_slip_.assign(3 * neighbors_.indices.size(), 0.0f);
+  const size_t entries = neighbors_.indices.size();
+  // the rows are last substep's: each entry's slip is where it was saved
+  const bool kept = pairs && same_rows && hist_slip_.size() == 3 * entries;
+  if (kept) pair_slip_.swap(hist_slip_);
+  else if (pairs) pair_slip_.assign(3 * entries, 0.0f);
   if (planes) plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
-  if (hist_id_.empty()) return;
+  const bool lookup_pairs = pairs && !kept && !hist_slip_.empty();
+  if (hist_id_.empty() || (!lookup_pairs && !planes)) return;
+  // last substep's grains by id (ids far sparser than the grains: no history)
+  int32_t top = -1;
+  for (int32_t id : hist_id_) {
+    if (id < 0) return;
+    top = std::max(top, id);
+  }
+  if (static_cast<size_t>(top) > 8 * n + 1024) return;
+  hist_lookup_.assign(size_t(top) + 1, -1);
+  for (size_t i = 0; i < hist_id_.size(); ++i) hist_lookup_[hist_id_[i]] = static_cast<int32_t>(i);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     const int32_t h = previous_index(grain_id(d, i));
     if (h < 0) continue;
-    if (pairs)
+    if (lookup_pairs)
       for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
         const int32_t other = grain_id(d, neighbors_.indices[k]);
-        for (uint32_t m = hist_offsets_[h]; m < hist_offsets_[h + 1]; ++m)
-          if (hist_partner_[m] == other) {
-            std::copy_n(&hist_slip_[3 * m], 3, &pair_slip_[3 * size_t(k)]);
+        for (uint32_t m = hist_rows_.offsets[h]; m < hist_rows_.offsets[h + 1]; ++m)
+          if (hist_id_[hist_rows_.indices[m]] == other) {
+            std::copy_n(&hist_slip_[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
             break;
           }
       }
@@ -1026,95 +1121,72 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, in
 void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const float* P,
                                 const float* p, bool pairs, bool planes, int threads) {
   const size_t n = d.n;
+  const long ln = static_cast<long>(n);
   const float dt = s.dt;
   // A stuck contact remembers at most this much slip, as a DEM contact's tangential spring
   // saturates at mu F_n / k_t (a fraction of its normal overlap): kHistoryReach x the static
   // coefficient x the summed radii. Slip beyond it is sliding, forgotten.
-  const float reach = kHistoryReach;
-  const float mu_pairs = s.friction_with_particles * s.static_threshold;
-  const float mu_planes = s.friction_with_colliders * s.static_threshold;
+  const float mu_pairs = kHistoryReach * s.friction_with_particles * s.static_threshold;
+  const float mu_planes = kHistoryReach * s.friction_with_colliders * s.static_threshold;
   auto capped = [](gr_float3 h, float cap) {
     const float l = gr_length(h);
     return l > cap ? gr_scale(h, cap / l) : h;
   };
-  const long ln = static_cast<long>(n);
   hist_id_.resize(n);
-  int32_t top = -1;
-  bool dense = true;
-  for (size_t i = 0; i < n; ++i) {
-    hist_id_[i] = grain_id(d, i);
-    top = std::max(top, hist_id_[i]);
-    dense = dense && hist_id_[i] >= 0;
+  for (size_t i = 0; i < n; ++i) hist_id_[i] = grain_id(d, i);
+  // pairs: one slip per entry of the rows (0: the contact did not push in the substep), so that
+  // rows kept for the next substep find theirs in place; the lookup after a rebuild reads the
+  // rows from hist_rows_
+  if (pairs) hist_slip_.resize(3 * neighbors_.indices.size());
+  else hist_slip_.clear();
+  if (planes) {
+    hist_plane_offsets_.assign(n + 1, 0);
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) {
+      uint32_t c = 0;
+      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
+        c += collider_normal_[e] > 0.0f ? 1 : 0;
+      hist_plane_offsets_[i + 1] = c;
+    }
+    for (size_t i = 0; i < n; ++i) hist_plane_offsets_[i + 1] += hist_plane_offsets_[i];
+    hist_plane_collider_.resize(hist_plane_offsets_[n]);
+    hist_plane_slip_.resize(3 * size_t(hist_plane_offsets_[n]));
+  } else {
+    hist_plane_offsets_.assign(n + 1, 0);
   }
-  // ids far sparser than the grains: no history (the lookup would cost more than it saves)
-  if (!dense || static_cast<size_t>(top) > 8 * n + 1024) {
-    hist_id_.clear();
-    hist_lookup_.clear();
-    return;
-  }
-  hist_lookup_.assign(size_t(top) + 1, -1);
-  for (size_t i = 0; i < n; ++i) hist_lookup_[hist_id_[i]] = static_cast<int32_t>(i);
-  // a contact is kept when it pushed in the substep and its grain did not slide
-  auto pair_kept = [&](size_t i, uint32_t k) {
-    return neighbors_.indices[k] != i && gr_as_float(pair_normal_[k]) > 0.0f;
-  };
-  auto plane_kept = [&](uint32_t e) { return collider_normal_[e] > 0.0f; };
-  hist_offsets_.assign(n + 1, 0);
-  hist_plane_offsets_.assign(n + 1, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
-    uint32_t c = 0, cp = 0;
-    if (pairs)
-      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
-        c += pair_kept(i, k) ? 1 : 0;
-    if (planes)
-      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) cp += plane_kept(e);
-    hist_offsets_[i + 1] = c;
-    hist_plane_offsets_[i + 1] = cp;
-  }
-  for (size_t i = 0; i < n; ++i) {
-    hist_offsets_[i + 1] += hist_offsets_[i];
-    hist_plane_offsets_[i + 1] += hist_plane_offsets_[i];
-  }
-  hist_partner_.resize(hist_offsets_[n]);
-  hist_slip_.resize(3 * size_t(hist_offsets_[n]));
-  hist_plane_collider_.resize(hist_plane_offsets_[n]);
-  hist_plane_slip_.resize(3 * size_t(hist_plane_offsets_[n]));
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < ln; ++i) {
-    const gr_float3 pi = gr_load3(p, static_cast<int>(i));
-    const gr_float3 di = gr_sub(pi, gr_load3(P, static_cast<int>(i)));
-    uint32_t m = hist_offsets_[i];
+    const int ii = static_cast<int>(i);
+    const gr_float3 pi = gr_load3(p, ii);
+    const gr_float3 di = gr_sub(pi, gr_load3(P, ii));
+    const float mu_i = d.friction ? d.friction[i] : 1.0f;
     if (pairs)
       for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-        if (!pair_kept(i, k)) continue;
         const int j = static_cast<int>(neighbors_.indices[k]);
-        const gr_float3 pj = gr_load3(p, j);
-        gr_float3 dx = gr_add(gr_sub(di, gr_sub(pj, gr_load3(P, j))),
-                              gr_load3(pair_slip_.data(), static_cast<int>(k)));
-        const gr_float3 xij = gr_sub(pi, pj);
-        const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), static_cast<int>(i), j);
-        hist_partner_[m] = grain_id(d, size_t(j));
-        const float cap =
-            reach * mu_pairs * (d.friction ? d.friction[i] : 1.0f) * (radius_[i] + radius_[j]);
-        gr_store3(hist_slip_.data(), static_cast<int>(m),
-                  capped(gr_madd(dx, nn, -gr_dot(dx, nn)), cap));
-        ++m;
+        gr_float3 h = gr_make3(0.0f, 0.0f, 0.0f);
+        if (j != ii && gr_as_float(pair_normal_[k]) > 0.0f) {
+          const gr_float3 pj = gr_load3(p, j);
+          const gr_float3 dx = gr_add(gr_sub(di, gr_sub(pj, gr_load3(P, j))),
+                                      gr_load3(pair_slip_.data(), static_cast<int>(k)));
+          const gr_float3 xij = gr_sub(pi, pj);
+          const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), ii, j);
+          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), mu_pairs * mu_i * (radius_[i] + radius_[j]));
+        }
+        gr_store3(hist_slip_.data(), static_cast<int>(k), h);
       }
-    m = hist_plane_offsets_[i];
-    if (planes)
-      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
-        if (!plane_kept(e)) continue;
-        const float* pl = &plane_[9 * size_t(e)];
-        const gr_float3 nn = gr_make3(pl[3], pl[4], pl[5]);
-        gr_float3 dx = gr_madd(di, gr_make3(pl[6], pl[7], pl[8]), -dt);
-        dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
-        hist_plane_collider_[m] = plane_collider_[e];
-        const float cap = reach * mu_planes * (d.friction ? d.friction[i] : 1.0f) * 2 * radius_[i];
-        gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
-                  capped(gr_madd(dx, nn, -gr_dot(dx, nn)), cap));
-        ++m;
-      }
+    if (!planes) continue;
+    uint32_t m = hist_plane_offsets_[i];
+    for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
+      if (!(collider_normal_[e] > 0.0f)) continue;
+      const float* pl = &plane_[9 * size_t(e)];
+      const gr_float3 nn = gr_make3(pl[3], pl[4], pl[5]);
+      gr_float3 dx = gr_madd(di, gr_make3(pl[6], pl[7], pl[8]), -dt);
+      dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
+      hist_plane_collider_[m] = plane_collider_[e];
+      gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
+                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), mu_planes * mu_i * 2 * radius_[i]));
+      ++m;
+    }
   }
 }
 

@@ -167,13 +167,25 @@ class GrainsSolver {
   // contact history (friction anchors): each contact's slip its friction has not yet removed,
   // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
   // pulling back to where it stuck until it slides
-  void load_history(const GrainsData& d, bool pairs, bool planes, int threads);
+  void load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows, int threads);
   void save_history(const GrainsData& d, const GrainsSettings& s, const float* P, const float* p,
                     bool pairs, bool planes, int threads);
   int32_t previous_index(int32_t id) const;
 
+  // Verlet reuse of the neighbour rows across substeps (substep(): keep_rows)
+  void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
+                     int threads);
+
   NeighborSearch search_;
   NeighborList neighbors_;
+  // the rows' build: valid, for these grains (ids) and radii, from these predicted positions,
+  // with these search settings; skin (m): how far apart from touching a pair left out was
+  bool rows_valid_ = false;
+  float rows_skin_ = 0, rows_query_scale_ = 0;
+  int rows_max_ = 0;
+  bool rows_uniform_ = false;
+  std::vector<int32_t> rows_ids_;
+  std::vector<float> rows_radius_, rows_p_;
   // scratch, reused between substeps (n = grains this substep)
   std::vector<float> p_, p_next_;   // (n x 3) m: the Jacobi iterates
   std::vector<float> p_before_;     // (n x 3) m: the iterate before p_ (Chebyshev only)
@@ -190,16 +202,18 @@ class GrainsSolver {
   size_t row_stride_ = 1;              // floats between threads' rows in pair_normal_it_
   // pre-stabilization: start positions with the overlaps they began with removed (g.P after it)
   static constexpr float kStabilizeTolerance = 0.002f;  // of a grain's radius
-  static constexpr int kStabilizeIterations = 64;
+  static constexpr int kStabilizeIterations = 64;  // and at most constraint_iterations
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   static constexpr float kHistoryReach = 0.01f;  // see save_history
   // the history saved at the end of the last substep, by grain in that substep's order: the id
-  // of each grain, then per grain a row of (partner's id, slip) and of (collider, slip)
+  // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once
+  // they are rebuilt), and per grain a row of (collider, slip)
   std::vector<int32_t> hist_id_;
   std::vector<int32_t> hist_lookup_;  // id -> index into hist_id_ (-1: none), ids >= 0
-  std::vector<uint32_t> hist_offsets_, hist_plane_offsets_;
-  std::vector<int32_t> hist_partner_, hist_plane_collider_;
+  NeighborList hist_rows_;
+  std::vector<uint32_t> hist_plane_offsets_;
+  std::vector<int32_t> hist_plane_collider_;
   std::vector<float> hist_slip_, hist_plane_slip_;  // (entries x 3) m
   std::vector<float> pair_slip_;   // (neighbour entries x 3) m: this substep's, from the history
   std::vector<float> plane_slip_;  // (plane entries x 3) m

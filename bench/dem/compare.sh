@@ -12,6 +12,7 @@ if [ "${1:-}" = "--liggghts" ]; then lig=1; shift; fi
 out=${1:-out/dem}
 ref=$(cd ../shared/reference/dem && pwd)
 mkdir -p "$out"
+out=$(cd "$out" && pwd)  # absolute: LIGGGHTS runs elsewhere
 G=build/grains
 cpu() { /usr/bin/time -f "%U %S" "$@" 2>&1 >/dev/null | tail -1 | awk '{print $1 + $2}'; }
 
@@ -44,6 +45,6 @@ if [ $lig = 1 ]; then
   # run_all.sh writes its results beside itself: a writable copy
   rm -rf "$out/ref"; cp -r "$ref" "$out/ref"; chmod -R u+w "$out/ref"
   for s in collapse_norot pile_norot; do
-    OUT="$(pwd)/$out/liggghts" bash "$out/ref/run_all.sh" 1 "$s" | grep -E "total_wall|runout|angle" || true
+    OUT="$out/liggghts" bash "$out/ref/run_all.sh" 1 "$s" | grep -E "total_wall|runout|angle" || true
   done
 fi

@@ -91,6 +91,11 @@ gr_params make_params(const GrainsSettings& s) {
 
 inline Vec3 to_vec(gr_float3 a) { return {a.x, a.y, a.z}; }
 
+// grain i's id (GrainsData::id), or its index when the caller gives none
+inline int32_t grain_id(const GrainsData& d, size_t i) {
+  return d.id ? d.id[i] : static_cast<int32_t>(i);
+}
+
 // Removes the velocity component into a collider, relative to the collider's own motion;
 // returns the normal speed removed (>= 0).
 float remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocity) {
@@ -602,7 +607,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     std::vector<int32_t> key;
     key.reserve(1 + n + 2 * d.prim_count);
     key.push_back(static_cast<int32_t>(n));
-    for (size_t i = 0; i < n; ++i) key.push_back(d.id ? d.id[i] : static_cast<int32_t>(i));
+    for (size_t i = 0; i < n; ++i) key.push_back(grain_id(d, i));
     for (size_t e = 0; e < 2 * d.prim_count; ++e) {
       int32_t a = d.prim_points[e];
       key.push_back(a >= 0 && static_cast<size_t>(a) < n ? key[1 + a] : -1);
@@ -714,7 +719,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
         rows_uniform_ != s.assume_uniform_radius)
       return false;
     for (size_t i = 0; i < n; ++i)
-      if (rows_ids_[i] != (d.id ? d.id[i] : static_cast<int32_t>(i)) ||
+      if (rows_ids_[i] != grain_id(d, i) ||
           rows_radius_[i] != radius_[i])
         return false;
     const float* p = p_.data();
@@ -1028,7 +1033,7 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
   rows_uniform_ = s.assume_uniform_radius;
   if (!rows_valid_) return;
   rows_ids_.resize(n);
-  for (size_t i = 0; i < n; ++i) rows_ids_[i] = d.id ? d.id[i] : static_cast<int32_t>(i);
+  for (size_t i = 0; i < n; ++i) rows_ids_[i] = grain_id(d, i);
   rows_radius_.assign(radius_, radius_ + n);
   rows_p_.assign(p_.begin(), p_.begin() + 3 * n);
   float r_min = std::numeric_limits<float>::infinity(), r_max = 0;
@@ -1062,12 +1067,6 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
 // that pushed in the substep and whose grain did not slide keeps its left-over tangential slip,
 // and the next substep's friction removes it with its own: a contact creeps back to where it
 // stuck, within the same Coulomb bound, as a DEM contact's tangential spring pulls it back.
-
-namespace {
-inline int32_t grain_id(const GrainsData& d, size_t i) {
-  return d.id ? d.id[i] : static_cast<int32_t>(i);
-}
-}  // namespace
 
 int32_t GrainsSolver::previous_index(int32_t id) const {
   if (id < 0 || static_cast<size_t>(id) >= hist_lookup_.size()) return -1;

@@ -15,7 +15,7 @@ build: configure
 	cmake --build $(BUILD) -j $(JOBS)
 
 demo: build
-	$(GRAINS) run graphs/default.json --out out/demo
+	$(GRAINS) run graphs/default.json --out out/demo --overwrite
 	$(GRAINS) render out/demo --graph graphs/default.json
 	$(GRAINS) heap out/demo/frame_0096.ply
 	@echo "demo: frames and stats.csv are in out/demo; pictures in out/demo/render, contact sheet out/demo/render/contact_sheet.png"

@@ -922,7 +922,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o, int argc, char** arg
   b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds (with --features: at most 12 frames)");
   b->add_option("--frames", o.frames, "frames per run (default: the sweep file's or the graph's)")
       ->check(CLI::PositiveNumber);
-  b->add_option("--threads", o.threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  b->add_option("--threads", o.threads, "worker threads (default: all cores)")
+      ->check(CLI::Range(1, kMaxThreads));
   b->add_option("--repeat", o.repeat,
                 "run every setting this many times, in rounds; report the fastest timings "
                 "(default 1)")

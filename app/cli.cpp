@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -28,6 +29,18 @@ namespace {
 constexpr int kBadInput = 2;
 constexpr int kRunFailure = 1;
 
+// A number option that must be finite: CLI11 reads "nan" and "inf" as numbers.
+std::string finite_number(std::string& text) {
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used != text.size()) return "'" + text + "' is not a number";
+    return std::isfinite(v) ? "" : "'" + text + "' is not a finite number";
+  } catch (const std::exception&) {
+    return "'" + text + "' is not a number";
+  }
+}
+
 std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
   std::vector<Override> out;
   for (const auto& s : sets) out.push_back(parse_override(s));
@@ -43,17 +56,66 @@ void progress(int done, int total, double ms, size_t points) {
   std::fflush(stderr);
 }
 
+// What a run writes in its folder: frames, stats.csv, and their .tmp files while writing.
+bool run_owns(const std::filesystem::path& p) {
+  const std::string name = p.filename().string();
+  const std::string stem =
+      name.size() > 4 && name.ends_with(".tmp") ? name.substr(0, name.size() - 4) : name;
+  return stem == "stats.csv" || (stem.starts_with("frame_") && stem.ends_with(".ply"));
+}
+
+// A run's folders must be empty: frames left by an earlier, longer run would be read as this
+// one's. With `overwrite`, what a run owns (run_owns) is removed first and the rest kept.
+void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
+  namespace fs = std::filesystem;
+  for (const std::string& dir : dirs) {
+    std::error_code ec;
+    if (!fs::exists(dir, ec)) continue;
+    if (!fs::is_directory(dir, ec)) throw LoadError(dir, "", "the output folder is a file");
+    std::vector<fs::path> owned, other;
+    for (const auto& e : fs::directory_iterator(dir, ec))
+      (e.is_regular_file() && run_owns(e.path()) ? owned : other).push_back(e.path());
+    if (ec) throw LoadError(dir, "", "cannot list the output folder (" + ec.message() + ")");
+    if (owned.empty() && other.empty()) continue;
+    if (!overwrite) {
+      const fs::path first = !owned.empty() ? owned.front() : other.front();
+      throw LoadError(dir, "",
+                      "the output folder is not empty (" +
+                          std::to_string(owned.size() + other.size()) + " entries, e.g. " +
+                          first.filename().string() +
+                          "): pass --overwrite to replace its frames, or name another");
+    }
+    for (const fs::path& f : owned)
+      if (!fs::remove(f, ec) && ec)
+        throw std::runtime_error(f.string() + ": cannot remove (" + ec.message() + ")");
+  }
+}
+
 int cmd_run(const std::string& path, const std::string& out_override, int frames_override,
-            int threads, const std::vector<std::string>& sets, bool quiet) {
+            int threads, const std::vector<std::string>& sets, bool quiet, bool overwrite) {
   Graph g = load_graph(path, parse_overrides(sets));
   if (frames_override > 0) g.frames = frames_override;
   std::string out = out_override.empty() ? g.output.dir : out_override;
   Simulation sim(g, threads);
-  std::vector<std::unique_ptr<FrameWriter>> writers;
-  for (size_t k = 0; k < sim.object_count(); ++k) {
-    std::string dir = sim.object_count() == 1 ? out : out + "/" + sim.object(k).name;
-    writers.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+  std::vector<std::string> dirs;
+  for (size_t k = 0; k < sim.object_count(); ++k)
+    dirs.push_back(sim.object_count() == 1 ? out : out + "/" + sim.object(k).name);
+  // the solvers' folders inside `out` are the run's own; anything else there counts
+  if (sim.object_count() > 1) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (fs::is_directory(out, ec) && !overwrite)
+      for (const auto& e : fs::directory_iterator(out, ec))
+        if (std::find(dirs.begin(), dirs.end(), (fs::path(out) / e.path().filename()).string()) ==
+            dirs.end())
+          throw LoadError(out, "",
+                          "the output folder is not empty (" + e.path().filename().string() +
+                              "): pass --overwrite to replace its frames, or name another");
   }
+  prepare_output(dirs, overwrite);
+  std::vector<std::unique_ptr<FrameWriter>> writers;
+  for (const std::string& dir : dirs)
+    writers.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
   bool tty = isatty(fileno(stderr)) && !quiet;
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
@@ -172,7 +234,7 @@ int cli_main(int argc, char** argv) {
 
   std::string graph_path, out, in, type, cook_out;
   int frames = 0, threads = 0, substeps = 1, cook_frames = 1;
-  bool quiet = false, markdown = false, opencl = false;
+  bool quiet = false, markdown = false, opencl = false, overwrite = false;
   float ground = 0;
   std::vector<std::string> sets;
 
@@ -180,10 +242,13 @@ int cli_main(int argc, char** argv) {
   run->add_option("graph", graph_path, "graph file (JSON)")->required();
   run->add_option("--out", out, "output folder (default: the graph's output.dir)");
   run->add_option("--frames", frames, "number of frames (default: the graph's)")->check(CLI::PositiveNumber);
-  run->add_option("--threads", threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  run->add_option("--threads", threads, "worker threads (default: all cores)")
+      ->check(CLI::Range(1, kMaxThreads));
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
   run->add_flag("--quiet", quiet, "print nothing but errors");
+  run->add_flag("--overwrite", overwrite,
+                "replace the frames and stats.csv an earlier run left in the output folder");
 
   auto* validate = app.add_subcommand("validate", "load and check a graph without running it");
   validate->add_option("graph", graph_path, "graph file (JSON)")->required();
@@ -199,8 +264,9 @@ int cli_main(int argc, char** argv) {
   cook->add_option("--set", sets, "PARAM=VALUE");
   cook->add_option("--substeps", substeps, "substeps per frame")->check(CLI::PositiveNumber);
   cook->add_option("--frames", cook_frames, "frames")->check(CLI::PositiveNumber);
-  auto* ground_opt = cook->add_option("--ground", ground, "add a ground plane at this height");
-  cook->add_option("--threads", threads, "worker threads")->check(CLI::PositiveNumber);
+  auto* ground_opt = cook->add_option("--ground", ground, "add a ground plane at this height")
+                         ->check(CLI::Validator(finite_number, "FINITE"));
+  cook->add_option("--threads", threads, "worker threads")->check(CLI::Range(1, kMaxThreads));
   cook->add_option("--out", cook_out, "output folder")->required();
 
   BenchOptions bench_opts;
@@ -233,7 +299,7 @@ int cli_main(int argc, char** argv) {
         std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
         return kBadInput;
       }
-      return cmd_run(graph_path, out, frames, threads, sets, quiet);
+      return cmd_run(graph_path, out, frames, threads, sets, quiet, overwrite);
     }
     if (validate->parsed()) {
       Graph g = load_graph(graph_path);

@@ -787,7 +787,7 @@ CLI::App* add_validation_command(CLI::App& app, ValidationOptions& o, int argc, 
   c->add_option("--md", o.md_path, "Markdown report to write (default VALIDATION.md)");
   c->add_flag("--quick", o.quick, "the tests' reduced sizes (a few minutes on one core)");
   c->add_option("--threads", o.threads, "worker threads (default: all cores)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1, kMaxThreads));
   c->add_option("--only", o.only, "collapse, silo and/or repose (default: all)")
       ->check(CLI::IsMember({"collapse", "silo", "repose"}));
   c->add_option("--substeps", o.substeps, "substeps of every run (default: the plan's)")

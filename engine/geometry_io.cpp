@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -32,7 +33,12 @@ constexpr bool kHostLittle = std::endian::native == std::endian::little;
   throw GeometryError(path + ": " + what);
 }
 
+// "NaN" or "infinite": what a non-finite number read from a file is called in its error
+const char* non_finite_name(float x) { return std::isnan(x) ? "NaN" : "infinite"; }
+
 std::string read_whole_file(const std::string& path) {
+  if (std::string bad = input_file_problem(path, kMaxGeometryFileBytes); !bad.empty())
+    fail(path, bad);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
   std::string data;
@@ -737,6 +743,10 @@ Mesh read_ply_mesh(const std::string& path) {
     if (vertex) {
       mesh.vertices.resize(el.count);
       for (size_t p = 0; p < el.count; ++p) mesh.vertices[p] = load3(xyz.data(), p);
+      for (size_t q = 0; q < xyz.size(); ++q)
+        if (!std::isfinite(xyz[q]))
+          fail(path, "vertex " + std::to_string(q / 3) + ": property '" + "xyz"[q % 3] + "' is " +
+                         non_finite_name(xyz[q]));
     }
   }
   if (!have_vertex) fail(path, "no vertex element");
@@ -825,6 +835,25 @@ ParticleStore read_ply(const std::string& path) {
   }
 
   const size_t n = s.size();
+  // a number that is not finite would spread through the solve to every grain it touches:
+  // refused here, where its file, element and index are known (a double beyond the float range
+  // arrives as infinity)
+  for (size_t k = 0; k < dest.size(); ++k) {
+    if (!dest[k] || dest[k]->type == AttribType::Int) continue;
+    const Attribute* a = s.find(dest[k]->attr);
+    const size_t stride = a->components();
+    for (size_t i = 0; i < n; ++i) {
+      const float x = a->f[i * stride + dest[k]->comp];
+      if (!std::isfinite(x))
+        fail(path, "vertex " + std::to_string(i) + ": property '" + vel.props[k].name + "' is " +
+                       non_finite_name(x));
+    }
+  }
+  for (const auto& [name, values] : edges.attrs)
+    for (size_t p = 0; p < values.size(); ++p)
+      if (!std::isfinite(values[p]))
+        fail(path, "edge " + std::to_string(p) + ": property '" + name + "' is " +
+                       non_finite_name(values[p]));
   if (id_prop >= 0 && !vel.props[id_prop].is_list && n > 0) {
     std::vector<int32_t> ids(s.i_if("id"), s.i_if("id") + n);
     std::sort(ids.begin(), ids.end());
@@ -863,6 +892,8 @@ ParticleStore read_ply(const std::string& path) {
 }
 
 Mesh read_obj(const std::string& path) {
+  if (std::string bad = input_file_problem(path, kMaxGeometryFileBytes); !bad.empty())
+    fail(path, bad);
   std::ifstream in(path);
   if (!in) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
   Mesh mesh;
@@ -888,6 +919,8 @@ Mesh read_obj(const std::string& path) {
         auto [ptr, ec] = std::from_chars(first, t.data() + t.size(), p[c]);
         if (ec != std::errc() || ptr != t.data() + t.size())
           fail(where(line_no), "bad number '" + t + "'");
+        if (!std::isfinite(p[c]))
+          fail(where(line_no), "vertex coordinate '" + t + "' is " + non_finite_name(p[c]));
       }
       mesh.vertices.push_back(p);
     } else if (tok[0] == "f") {
@@ -922,6 +955,21 @@ Mesh read_obj(const std::string& path) {
     fail(where(max_line), "face vertex " + std::to_string(max_index + 1) + " is out of range (" +
                               std::to_string(mesh.vertices.size()) + " vertices)");
   return mesh;
+}
+
+std::string input_file_problem(const std::string& path, uint64_t max_bytes) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) return "cannot open (No such file or directory)";
+  if (fs::is_directory(st)) return "is a folder, not a file";
+  if (!fs::is_regular_file(st)) return "is not a regular file";
+  const uintmax_t size = fs::file_size(path, ec);
+  if (ec) return "cannot read its size (" + ec.message() + ")";
+  if (size > max_bytes)
+    return "is " + std::to_string(size) + " bytes, more than the " + std::to_string(max_bytes) +
+           " an input may have";
+  return "";
 }
 
 Mesh read_mesh(const std::string& path) {

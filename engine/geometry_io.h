@@ -2,6 +2,7 @@
 #pragma once
 #include <array>
 #include <stdexcept>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,12 @@ void write_ply_all(const std::string& path, const ParticleStore& pts);
 // double properties → Float; integer properties → Int (id included; ids are assigned when absent
 // and next_id is set past the largest). Edge element (vertex1 vertex2, plus float properties →
 // primitive attributes) → primitives; a missing restlength is the distance at load.
+// Inputs are plain files of bounded size: a folder, a device (/dev/zero) or a file past the
+// limit is refused before any byte is read. Returns what is wrong ("" when nothing).
+constexpr uint64_t kMaxGeometryFileBytes = uint64_t(8) << 30;  // 8 GiB: about 300 M points
+constexpr uint64_t kMaxGraphFileBytes = uint64_t(64) << 20;    // 64 MiB of JSON
+std::string input_file_problem(const std::string& path, uint64_t max_bytes);
+
 // Throws GeometryError (file + what) for a missing file, bad header, no x/y/z, a known attribute
 // of the wrong type (e.g. an int pscale), edge indices out of range, truncated data.
 ParticleStore read_ply(const std::string& path);

@@ -1,11 +1,15 @@
 #include "engine/graph.h"
 
+#include <cctype>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+
+#include "engine/geometry_io.h"
 
 namespace grains {
 
@@ -42,6 +46,14 @@ std::string type_of(const json& j) {
   return "an object";
 }
 
+bool plain_name(const std::string& name) {
+  if (name.empty() || name.size() > 100 || name[0] == '.' || name[0] == '-') return false;
+  for (char c : name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.'))
+      return false;
+  return true;
+}
+
 struct Loader {
   std::string file;
 
@@ -68,6 +80,7 @@ struct Loader {
       if (d.type == ParamType::Toggle && c.value != 0 && c.value != 1)
         fail(ptr, "'" + d.name + "' is a toggle: true, false, 0, 1 or an expression");
       check_range(d, c.value, ptr);
+      if (const std::string bad = d.value_error(c.value); !bad.empty()) fail(ptr, bad);
       return c;
     }
     if (j.is_boolean()) {
@@ -195,6 +208,10 @@ struct Loader {
         fail("/frames", "frames is an integer, got " + root["frames"].dump());
       int64_t f = root["frames"].get<int64_t>();
       if (f <= 0) fail("/frames", "frames must be at least 1, got " + std::to_string(f));
+      if (f > std::numeric_limits<int>::max())
+        fail("/frames", "frames must be at most " +
+                            std::to_string(std::numeric_limits<int>::max()) + ", got " +
+                            std::to_string(f));
       g.frames = static_cast<int>(f);
     }
     if (root.contains("seed")) {
@@ -234,6 +251,13 @@ struct Loader {
       NodeDesc d;
       d.name = n["name"].get<std::string>();
       d.pointer = ptr;
+      // a solver's name becomes its output folder: plain names only, so that nothing is written
+      // outside the folder the user named
+      if (!plain_name(d.name))
+        fail(ptr + "/name",
+             "a node name is letters, digits, '_', '-' and '.', not starting with "
+             "'.' or '-', at most 100 characters; got \"" +
+                 d.name + "\"");
       if (by_name.count(d.name)) fail(ptr + "/name", "duplicate node name '" + d.name + "'");
       by_name[d.name] = static_cast<int>(k);
       if (!n.contains("type") || !n["type"].is_string()) fail(ptr + "/type", "every node needs a string type");
@@ -334,7 +358,11 @@ struct Loader {
     for (const auto& d : g.nodes) {
       if (!d.info->check) continue;
       ParamSet ps(d.info->params, d.params);
-      ps.evaluate(ExprVars{});
+      try {
+        ps.evaluate(ExprVars{});
+      } catch (const ParamRangeError& e) {  // an expression's value at the start
+        fail(d.pointer + "/params/" + e.param, e.what());
+      }
       auto [msg, param] = d.info->check(ps, g.base_dir);
       if (!msg.empty()) fail(d.pointer + (param.empty() ? "" : "/params/" + param), msg);
     }
@@ -397,6 +425,8 @@ Graph parse_graph(const std::string& text, const std::string& file,
 }
 
 Graph load_graph(const std::string& path, const std::vector<Override>& overrides) {
+  if (std::string bad = input_file_problem(path, kMaxGraphFileBytes); !bad.empty())
+    throw LoadError(path, "", "the graph file " + bad);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw LoadError(path, "", "cannot open the graph file");
   std::stringstream ss;

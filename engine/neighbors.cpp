@@ -731,7 +731,8 @@ void NeighborSearch::find(const float* P, const float* radius, size_t n, const N
           top += ts.list.size();
         }
         chunk_pos[c] = uint32_t(pos);
-        if (pos + ts.list.size() <= cap)  // past cap: keep counting so the retry knows the size
+        // past cap: keep counting so the retry knows the size (an empty list may have no data)
+        if (!ts.list.empty() && pos + ts.list.size() <= cap)
           std::memcpy(buf.data() + pos, ts.list.data(), ts.list.size() * sizeof(uint32_t));
       }
 #pragma omp single

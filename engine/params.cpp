@@ -1,6 +1,7 @@
 #include "engine/params.h"
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 #include <stdexcept>
 
@@ -94,6 +95,27 @@ std::string ParamDecl::default_text() const {
   return "";
 }
 
+// a number as the user would write it: integers whole, others to float precision and more
+static std::string exact(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.15g", v);
+  return buf;
+}
+
+std::string ParamDecl::value_error(double v) const {
+  if (!std::isfinite(v)) return "'" + name + "' must be a finite number, got " + exact(v);
+  // an integer's value must fit an int (2^31 - 1), else it would wrap where it is read
+  constexpr double kIntMax = 2147483647.0;
+  if (type == ParamType::Int && !(std::fabs(v) <= kIntMax))
+    return "'" + name + "' must be at most " + exact(kIntMax) + " in size, got " + exact(v);
+  if (has_min && (min_exclusive ? !(v > min) : !(v >= min)))
+    return "'" + name + "' must be " + (min_exclusive ? "greater than " : "at least ") +
+           exact(min) + ", got " + exact(v);
+  if (has_max && !(v <= max))
+    return "'" + name + "' must be at most " + exact(max) + ", got " + exact(v);
+  return "";
+}
+
 std::vector<std::string> ParamDecl::channel_names() const {
   if (type == ParamType::Vec3) return {name + "x", name + "y", name + "z"};
   if (animatable()) return {name};
@@ -143,6 +165,12 @@ void ParamSet::evaluate(ExprVars vars) {
     for (size_t k = 0; k < e.channels.size(); ++k) {
       double v = e.channels[k].eval(vars);
       if (e.decl->type == ParamType::Int) v = std::round(v);
+      // constants were checked when the graph loaded; expressions and keys are checked here,
+      // each time they are evaluated
+      if (!e.channels[k].is_constant()) {
+        const std::string bad = e.decl->value_error(v);
+        if (!bad.empty()) throw ParamRangeError(e.decl->name, bad);
+      }
       if (e.decl->type == ParamType::Toggle) v = v != 0 ? 1 : 0;
       e.value[k] = v;
     }
@@ -166,7 +194,10 @@ const ParamSet::Entry& ParamSet::get(const std::string& name, ParamType expect) 
 
 double ParamSet::f(const std::string& name) const { return get(name, ParamType::Float).value[0]; }
 int ParamSet::i(const std::string& name) const {
-  return static_cast<int>(get(name, ParamType::Int).value[0]);
+  const double v = get(name, ParamType::Int).value[0];
+  // checked where the value was set (value_error): in range here
+  if (!(std::fabs(v) <= 2147483647.0)) throw std::logic_error("'" + name + "' is beyond int");
+  return static_cast<int>(v);
 }
 bool ParamSet::b(const std::string& name) const {
   return get(name, ParamType::Toggle).value[0] != 0;

@@ -3,6 +3,7 @@
 // nodes`, the docs and the conformance tests all read these tables.
 #pragma once
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -56,8 +57,20 @@ struct ParamDecl {
            type == ParamType::Vec3;
   }
   std::string default_text() const;
+  // What is wrong with v as this parameter's value ("" when nothing): not a finite number, an
+  // integer beyond int, or outside the declared range. The loader says it of a literal, the
+  // evaluation of a value from an expression or keyframes (ParamRangeError).
+  std::string value_error(double v) const;
   // channel names this parameter contributes as local variables (name, or namex namey namez)
   std::vector<std::string> channel_names() const;
+};
+
+// A value an expression or keyframes gave a parameter that its declaration does not allow; the
+// simulation names the node, the frame and the graph file (the loader's message for a literal).
+struct ParamRangeError : std::runtime_error {
+  ParamRangeError(std::string param_name, const std::string& message)
+      : std::runtime_error(message), param(std::move(param_name)) {}
+  std::string param;
 };
 
 // A parameter as authored in the graph, validated against its declaration. Numeric channels

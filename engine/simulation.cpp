@@ -9,6 +9,7 @@
 #include <functional>
 #include <limits>
 #include <set>
+#include <stdexcept>
 
 #include "engine/geometry_io.h"
 #include "engine/neighbors.h"
@@ -93,6 +94,16 @@ ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
   return v;
 }
 
+template <class F>
+void Simulation::checked(int node, F&& f) {
+  try {
+    f();
+  } catch (const ParamRangeError& e) {
+    throw LoadError(graph_.file, graph_.nodes[node].pointer + "/params/" + e.param,
+                    "frame " + std::to_string(frame_ + 1) + ": " + e.what());
+  }
+}
+
 void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
   for (size_t k = 0; k < obj.collider_nodes.size(); ++k) {
     int node = obj.collider_nodes[k];
@@ -100,11 +111,11 @@ void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
     ParamSet& ps = obj.collider_params[k];
     ColliderState& c = obj.colliders[k];
     if (!obj.colliders_posed) {  // the pose at the start of the simulation
-      ps.evaluate(vars_for(obj, node, t_end - dt));
+      checked(node, [&] { ps.evaluate(vars_for(obj, node, t_end - dt)); });
       info->collider(ps, c);
     }
     Pose before = c.pose;
-    ps.evaluate(vars_for(obj, node, t_end));
+    checked(node, [&] { ps.evaluate(vars_for(obj, node, t_end)); });
     info->collider(ps, c);
     c.name = graph_.nodes[node].name;
     c.prev_pose = before;
@@ -150,6 +161,44 @@ int refine_to(int base, int need, int most) {
   return s;
 }
 
+
+// A position, velocity or force that is not finite stops the run where it first appears: the
+// next substep would spread it to every grain it touches, and the frames would fill with NaN.
+// Checked after each node of each substep, so the error names the node that made it; the frames
+// already written stay. Returns the first such point's index, or -1.
+long first_non_finite(const ParticleStore& pts, int threads) {
+  const long n = static_cast<long>(pts.size());
+  const float* arrays[3] = {pts.v3_if("P"), pts.v3_if("v"), pts.v3_if("force")};
+  long first = n;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : first)
+  for (long i = 0; i < n; ++i)
+    for (const float* a : arrays)
+      if (a && !(std::isfinite(a[3 * i]) && std::isfinite(a[3 * i + 1]) &&
+                 std::isfinite(a[3 * i + 2])))
+        first = std::min(first, i);
+  return first < n ? first : -1;
+}
+
+[[noreturn]] void non_finite_error(const ParticleStore& pts, long i, const std::string& node,
+                                   int frame, int substep, int substeps) {
+  std::string what;
+  for (const char* name : {"P", "v", "force"}) {
+    const float* a = pts.v3_if(name);
+    if (!a) continue;
+    if (std::isfinite(a[3 * i]) && std::isfinite(a[3 * i + 1]) && std::isfinite(a[3 * i + 2]))
+      continue;
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "%s%s (%g, %g, %g)", what.empty() ? "" : ", ", name,
+                  a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+    what += buf;
+  }
+  const int32_t* id = pts.i_if("id");
+  throw std::runtime_error("frame " + std::to_string(frame) + ", substep " +
+                           std::to_string(substep + 1) + " of " + std::to_string(substeps) +
+                           ", node '" + node + "': point id " +
+                           std::to_string(id ? id[i] : int32_t(i)) + " is not finite: " + what);
+}
+
 }  // namespace
 
 // Error control (solver `error_control`, DESIGN §3): a frame starts with the count the last one
@@ -166,7 +215,8 @@ int refine_to(int base, int need, int most) {
 // the same for any thread count.
 void Simulation::step_object(SimObject& obj) {
   ChainNode& solver_entry = obj.chain.back();
-  solver_entry.params.evaluate(vars_for(obj, obj.solver, frame_ / graph_.fps));
+  checked(obj.solver,
+          [&] { solver_entry.params.evaluate(vars_for(obj, obj.solver, frame_ / graph_.fps)); });
   const ParamSet& sp = solver_entry.params;
   const int base = std::max(1, sp.i("substeps"));
   bool control = sp.b("error_control");
@@ -196,6 +246,7 @@ void Simulation::step_object(SimObject& obj) {
   float frame_error = 0;
   int taken = 0;
 
+  const int check_threads = threads_ > 0 ? threads_ : omp_get_max_threads();
   for (int s = 0; s < substeps; ++s) {
     time.substeps = substeps;
     time.stabilize = refined;
@@ -212,7 +263,7 @@ void Simulation::step_object(SimObject& obj) {
     for (auto& c : obj.chain) {
       const NodeDesc& d = graph_.nodes[c.node];
       ExprVars vars = vars_for(obj, c.node, time.st);
-      if (&c != &solver_entry) c.params.evaluate(vars);
+      if (&c != &solver_entry) checked(c.node, [&] { c.params.evaluate(vars); });
       if (!c.impl) continue;
       // members: the points of this node's streams (every point when it has none)
       members.clear();
@@ -242,7 +293,9 @@ void Simulation::step_object(SimObject& obj) {
                       &obj.feedback_on,
                       &vars,
                       control ? &substep_error : nullptr};
-      c.impl->cook(ctx);
+      checked(c.node, [&] { c.impl->cook(ctx); });  // a node may evaluate its own (target)
+      if (const long bad = first_non_finite(pts, check_threads); bad >= 0)
+        non_finite_error(pts, bad, d.name, frame_ + 1, s, substeps);
     }
     ++taken;
     frame_error = std::max(frame_error, substep_error);
@@ -318,11 +371,14 @@ bool penetration_uniform(const float* P, size_t n, float r, PenetrationSums& tot
     for (int a = 0; a < 3; ++a)
       if (std::isfinite(P[3 * i + a])) lo[a] = std::min(lo[a], P[3 * i + a]), hi[a] = std::max(hi[a], P[3 * i + a]);
   const double h = 2.0 * double(r);
-  if (!(h > 0) || !(lo[0] <= hi[0])) return false;
+  // every axis must have a finite range (one with no finite coordinate has lo > hi)
+  if (!(h > 0) || !(lo[0] <= hi[0]) || !(lo[1] <= hi[1]) || !(lo[2] <= hi[2])) return false;
   int64_t dim[3];
   double cells = 1;
   for (int a = 0; a < 3; ++a) {
-    dim[a] = int64_t((double(hi[a]) - lo[a]) / h) + 1;
+    const double span = (double(hi[a]) - lo[a]) / h;
+    if (!(span < 1e15)) return false;  // the general search then; no overflowing cast
+    dim[a] = int64_t(span) + 1;
     cells *= double(dim[a]);
   }
   if (cells > 8.0 * double(n) + 64) return false;

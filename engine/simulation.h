@@ -62,6 +62,10 @@ struct SimObject {
   FrameStats stats;
 };
 
+// The most worker threads a command accepts (--threads): far past any machine's cores, short of
+// where the OpenMP runtime fails to start them.
+constexpr int kMaxThreads = 1024;
+
 class Simulation {
  public:
   // threads <= 0: OpenMP's default.
@@ -82,6 +86,11 @@ class Simulation {
   void step_object(SimObject& obj);
   ExprVars vars_for(const SimObject& obj, int node, double st) const;
   void pose_colliders(SimObject& obj, double t_end, double dt);
+  // Runs f, which evaluates or cooks `node`; a parameter value out of its declared range
+  // (ParamRangeError, from an expression or keys) becomes the loader's error for that parameter
+  // at this frame: the graph file, the parameter's JSON pointer, the frame, the value.
+  template <class F>
+  void checked(int node, F&& f);
 
   Graph graph_;
   int threads_ = 0;

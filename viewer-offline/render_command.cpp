@@ -22,6 +22,7 @@
 
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
+#include "engine/simulation.h"
 #include "nodes/register.h"
 #include "viewer-offline/gif.h"
 #include "viewer-offline/render.h"
@@ -112,10 +113,10 @@ Camera parse_camera(const std::string& s, int w, int h) {
     try {
       size_t used = 0;
       v.push_back(std::stof(item, &used));
-      if (item.find_first_not_of(" \t", used) != std::string::npos)
+      if (item.find_first_not_of(" \t", used) != std::string::npos || !std::isfinite(v.back()))
         throw std::invalid_argument(item);
     } catch (const std::exception&) {
-      throw BadInput("--camera '" + s + "': '" + item + "' is not a number");
+      throw BadInput("--camera '" + s + "': '" + item + "' is not a finite number");
     }
   }
   if (v.size() != 7)
@@ -394,7 +395,14 @@ int run(const RenderOptions& opts) {
 
   const std::string out = opts.out.empty() ? (fs::path(opts.dir) / "render").string() : opts.out;
   std::unique_ptr<VideoSink> video;
-  // fail before any work when the video cannot be made
+  // fail before any work when the video cannot be made; its folder must exist (no folders are
+  // made outside the ones the user named)
+  if (!opts.video.empty()) {
+    const fs::path parent = fs::path(opts.video).parent_path();
+    if (!parent.empty() && !fs::is_directory(parent))
+      throw BadInput("--video " + opts.video + ": the folder " + parent.string() +
+                     " does not exist");
+  }
   if (!opts.video.empty() && lower(fs::path(opts.video).extension().string()) != ".gif" &&
       find_on_path("ffmpeg").empty())
     VideoSink(opts.video, W, H, fps);  // throws BadInput with the message
@@ -424,8 +432,6 @@ int run(const RenderOptions& opts) {
   fs::create_directories(out, ec);
   if (ec) throw std::runtime_error(out + ": cannot create the folder: " + ec.message());
   if (!opts.video.empty()) {
-    fs::path vp(opts.video);
-    if (vp.has_parent_path()) fs::create_directories(vp.parent_path(), ec);
     video = std::make_unique<VideoSink>(opts.video, W, H, fps);
   }
 
@@ -540,7 +546,7 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
   r->add_option("--supersample", o.supersample, "samples per pixel along each axis (default 2)")
       ->check(CLI::Range(1, 4));
   r->add_option("--threads", o.threads, "worker threads (default: all cores)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1, kMaxThreads));
   r->add_option("--sheet-frames", o.sheet_frames, "frames on the contact sheet (default 12)")
       ->check(CLI::Range(1, 64));
   r->add_flag("--flat", o.flat,

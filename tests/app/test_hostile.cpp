@@ -1,0 +1,258 @@
+// Hostile input (issue "hostile input"): numbers that are not finite are refused where they are
+// read (file, element, index; exit 2), and one that arises during a run stops it (exit 1) naming
+// the frame, substep, node and point, with the frames before it kept; thread counts are bounded.
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <fstream>
+
+#include "engine/geometry_io.h"
+#include "tests/support/support.h"
+
+using namespace grains;
+using namespace grains::test;
+namespace fs = std::filesystem;
+
+namespace {
+// a drop of 27 grains; FORCE_Y replaced by each test
+const char* kDrop = R"({"grains_graph": 1, "name": "drop", "fps": 24, "frames": 4, "nodes": [
+  {"name": "src", "type": "source", "params": {"shape": "box", "size": [0.3, 0.3, 0.3], "separation": 0.1, "center": [0, 1, 0]}},
+  {"name": "push", "type": "force", "inputs": ["src"], "params": {"force": [0, FORCE_Y, 0], "ignore_mass": true DRAG}},
+  {"name": "ground", "type": "collider", "params": {"shape": "plane"}},
+  {"name": "s", "type": "solver", "inputs": ["push"], "params": {"substeps": 2, "colliders": ["ground"]}}],
+  "output": {"dir": "unused"}})";
+
+std::string drop(const std::string& force_y, const std::string& drag = "") {
+  std::string g = kDrop;
+  g.replace(g.find("FORCE_Y"), 7, force_y);
+  g.replace(g.find(" DRAG"), 5, drag.empty() ? "" : ", \"drag\": " + drag);
+  return g;
+}
+
+// a PLY of three points whose coordinate `bad` (x, y or z) of point 1 is `value`
+std::string ascii_ply(const std::string& bad, const std::string& value) {
+  std::string rows[3] = {"0 0.5 0", "0.1 0.5 0", "0.2 0.5 0"};
+  std::string r = rows[1];
+  const int axis = bad == "x" ? 0 : bad == "y" ? 1 : 2;
+  std::vector<std::string> c = split(r, ' ');
+  c[axis] = value;
+  rows[1] = c[0] + " " + c[1] + " " + c[2];
+  return "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+         "property float z\nend_header\n" +
+         rows[0] + "\n" + rows[1] + "\n" + rows[2] + "\n";
+}
+}  // namespace
+
+TEST_CASE("a force beyond the float range stops the run naming frame, substep, node and point",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_inf_force");
+  // finite as a number (the parameter is valid), infinite as the float force from frame 3 on
+  std::string graph = write_file(dir, "g.json", drop("\"$F >= 3 ? 1e39 : -9.81\""));
+  std::string out = dir + "/out";
+  CHECK(run_grains("run " + graph + " --out " + out + " --quiet", dir + "/log") == 1);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("frame 3, substep 1 of 2, node 'push': point id 0 is not finite: "
+                             "force (0, inf, 0)"));
+  // the frames before it are kept, whole; nothing of frame 3
+  CHECK(read_ply(out + "/frame_0002.ply").size() == 27);
+  CHECK_FALSE(fs::exists(out + "/frame_0003.ply"));
+  const std::string stats = read_text(out + "/stats.csv");
+  CHECK(std::count(stats.begin(), stats.end(), '\n') == 3);  // header and frames 1, 2
+  CHECK(stats.find("nan") == std::string::npos);
+  CHECK(stats.find("inf") == std::string::npos);
+}
+
+TEST_CASE("an expression that turns NaN is refused at its frame, earlier frames kept",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_nan_force");
+  // sqrt(2.9 - F): finite through frame 2 (F = 2.5 at its second substep), NaN from frame 3
+  std::string graph = write_file(dir, "g.json", drop("\"-sqrt(2.9 - $F)\""));
+  std::string out = dir + "/out";
+  CHECK(run_grains("run " + graph + " --out " + out + " --quiet", dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains(graph + ": /nodes/1/params/force: frame 3: 'force' must be a finite "
+                                     "number, got nan"));
+  CHECK(read_ply(out + "/frame_0002.ply").size() == 27);
+  CHECK_FALSE(fs::exists(out + "/frame_0003.ply"));
+}
+
+TEST_CASE("forces beyond the float range stop the run instead of writing infinities",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_huge_force");
+  struct Case {
+    std::string force, drag;
+    int rc;
+  };
+  for (const Case& c :
+       std::vector<Case>{{"1e308", "", 1}, {"-9.81", "1e30", 1}, {"\"1 / ($F - 1)\"", "", 2}}) {
+    std::string graph = write_file(dir, "g.json", drop(c.force, c.drag));
+    INFO(c.force << " drag " << c.drag);
+    CHECK(run_grains("run " + graph + " --out " + dir + "/out --quiet", dir + "/log") == c.rc);
+    CHECK_THAT(read_text(dir + "/log"),
+               Catch::Contains(c.rc == 1 ? "is not finite" : "must be a finite number"));
+    if (fs::exists(dir + "/out"))
+      for (auto& e : fs::directory_iterator(dir + "/out")) {
+        if (e.path().extension() != ".ply") continue;
+        ParticleStore f = read_ply(e.path().string());  // refuses a non-finite number
+        CHECK(f.size() == 27);
+      }
+    fs::remove_all(dir + "/out");
+  }
+}
+
+TEST_CASE("a PLY or OBJ with a coordinate that is not finite is refused with its place",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_ply");
+  for (const char* axis : {"x", "y", "z"})
+    for (const char* value : {"nan", "inf", "-inf", "1e39"}) {
+      std::string ply = write_file(dir, "p.ply", ascii_ply(axis, value));
+      INFO(axis << " = " << value);
+      CHECK(run_grains("cook grains --in " + ply + " --out " + dir + "/o", dir + "/log") == 2);
+      const std::string log = read_text(dir + "/log");
+      CHECK_THAT(log, Catch::Contains(ply + ": vertex 1: property '" + axis + "' is"));
+      CHECK_FALSE(fs::exists(dir + "/o/frame_0001.ply"));
+      CHECK_THROWS_AS(read_ply(ply), GeometryError);
+      CHECK_THROWS_AS(read_mesh(ply), GeometryError);
+    }
+  std::string obj = write_file(dir, "m.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n");
+  CHECK_THROWS_WITH(read_mesh(obj), Catch::Contains(obj + ":2: vertex coordinate 'nan' is NaN"));
+  // a NaN rest length on an edge
+  std::string edges = write_file(dir, "e.ply",
+                                 "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                                 "property float y\nproperty float z\nelement edge 1\n"
+                                 "property int vertex1\nproperty int vertex2\n"
+                                 "property float restlength\nend_header\n0 0 0\n1 0 0\n0 1 nan\n");
+  CHECK_THROWS_WITH(read_ply(edges), Catch::Contains("edge 0: property 'restlength' is NaN"));
+}
+
+TEST_CASE("thread counts are bounded with a plain message", "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_threads");
+  std::string graph = write_file(dir, "g.json", drop("-9.81"));
+  for (const char* t : {"0", "65535", "-3"}) {
+    INFO("--threads " << t);
+    CHECK(run_grains("run " + graph + " --out " + dir + "/o --threads " + t, dir + "/log") == 2);
+    CHECK_THAT(read_text(dir + "/log"), Catch::Contains("not in range 1 to 1024"));
+    CHECK_FALSE(fs::exists(dir + "/o"));
+  }
+  CHECK(run_grains("run " + graph + " --out " + dir + "/o --quiet --threads 1024 --frames 1",
+                   dir + "/log") == 0);
+}
+
+TEST_CASE("numbers are checked where they are read: literals, expressions and keys",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_numbers");
+  struct Case {
+    std::string from, to;  // replaced in the drop graph
+    bool at_load;          // refused by validate, else at the frame it appears
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      // a literal integer beyond int used to wrap to 0 iterations
+      {"\"substeps\": 2", "\"substeps\": 2147483648", true,
+       "/nodes/3/params/substeps: 'substeps' must be at most 2147483647 in size, got 2147483648"},
+      {"\"frames\": 4", "\"frames\": 1000000000000", true,
+       "/frames: frames must be at most 2147483647, got 1000000000000"},
+      // expressions: checked each time they are evaluated, with the frame
+      {"\"substeps\": 2", "\"substeps\": \"-$F\"", false,
+       "/nodes/3/params/substeps: frame 1: 'substeps' must be at least 1, got -1"},
+      {"\"substeps\": 2", "\"substeps\": \"1/0\"", false,
+       "/nodes/3/params/substeps: frame 1: 'substeps' must be a finite number, got inf"},
+      {"\"separation\": 0.1", "\"separation\": \"0.1 - 0.05 * $F\"", false,
+       "/nodes/0/params/separation: frame 2: 'separation' must be greater than 0, got 0"},
+      // keys: a drag that turns negative would put energy in
+      {"\"ignore_mass\": true", "\"ignore_mass\": true, \"drag\": {\"keys\": [[0, 0], [2, -100]]}",
+       false, "/nodes/1/params/drag: frame 1: 'drag' must be at least 0, got -"},
+  };
+  for (const Case& c : cases) {
+    std::string text = drop("-9.81");
+    REQUIRE(text.find(c.from) != std::string::npos);
+    text.replace(text.find(c.from), c.from.size(), c.to);
+    std::string graph = write_file(dir, "g.json", text);
+    INFO(c.to);
+    CHECK(run_grains("validate " + graph, dir + "/vlog") == (c.at_load ? 2 : 0));
+    CHECK(run_grains("run " + graph + " --quiet --out " + dir + "/o", dir + "/log") == 2);
+    CHECK_THAT(read_text(dir + "/log"), Catch::Contains(graph + ": " + c.message));
+    if (c.at_load) CHECK_THAT(read_text(dir + "/vlog"), Catch::Contains(c.message));
+    if (c.at_load) CHECK_FALSE(fs::exists(dir + "/o"));
+    fs::remove_all(dir + "/o");
+  }
+}
+
+TEST_CASE("names that become paths are plain; nothing is written outside the named folders",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_paths");
+  for (const char* name : {"../../../x", "a/b", ".hidden", "-x", "a b", ""}) {
+    std::string text = drop("-9.81");
+    const std::string solver = "\"name\": \"s\", \"type\": \"solver\"";
+    text.replace(text.find(solver), solver.size(),
+                 std::string("\"name\": \"") + name + "\", \"type\": \"solver\"");
+    std::string graph = write_file(dir, "g.json", text);
+    INFO("solver name '" << name << "'");
+    CHECK(run_grains("validate " + graph, dir + "/log") == 2);
+    CHECK_THAT(read_text(dir + "/log"), Catch::Contains(graph + ": /nodes/3/name: "));
+    CHECK(run_grains("run " + graph + " --out " + dir + "/o", dir + "/log") == 2);
+    CHECK_FALSE(fs::exists(dir + "/o"));
+  }
+  CHECK_FALSE(fs::exists(dir + "/../x"));
+  // a video's folder must exist: render makes no folders but its own --out
+  std::string graph = write_file(dir, "g.json", drop("-9.81"));
+  REQUIRE(run_grains("run " + graph + " --quiet --frames 1 --out " + dir + "/frames",
+                     dir + "/log") == 0);
+  const std::string video = dir + "/missing/deeper/v.gif";
+  CHECK(run_grains("render " + dir + "/frames --size 32x24 --video " + video, dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("the folder " + dir + "/missing/deeper does not exist"));
+  CHECK_FALSE(fs::exists(dir + "/missing"));
+}
+
+TEST_CASE("a folder or a device where a file is expected is refused by name", "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_files");
+  fs::create_directories(dir + "/folder.json");
+  CHECK(run_grains("run " + dir + "/folder.json --out " + dir + "/o", dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains(dir + "/folder.json: the graph file is a folder, not a file"));
+  CHECK(run_grains("validate /dev/zero", dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("/dev/zero: the graph file is not a regular file"));
+  CHECK(run_grains("cook grains --in " + dir + "/folder.json --out " + dir + "/o", dir + "/log") ==
+        2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains("is a folder, not a file"));
+  CHECK_THROWS_WITH(read_ply("/dev/zero"), Catch::Contains("is not a regular file"));
+  fs::create_directories(dir + "/m.obj");
+  CHECK_THROWS_WITH(read_mesh(dir + "/m.obj"), Catch::Contains("m.obj: is a folder, not a file"));
+  CHECK_FALSE(fs::exists(dir + "/o"));
+}
+
+TEST_CASE("a used output folder is refused unless asked to overwrite, which clears old frames",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_reuse");
+  std::string graph = write_file(dir, "g.json", drop("-9.81"));
+  const std::string out = dir + "/o";
+  REQUIRE(run_grains("run " + graph + " --quiet --frames 3 --out " + out, dir + "/log") == 0);
+  write_file(out, "frame_0009.ply.tmp", "partial");  // as a killed run leaves it
+  write_file(out, "notes.txt", "mine");
+  CHECK(run_grains("run " + graph + " --quiet --frames 2 --out " + out, dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains(out + ": the output folder is not empty"));
+  CHECK(fs::exists(out + "/frame_0003.ply"));  // refused: nothing touched
+  CHECK(run_grains("run " + graph + " --quiet --frames 2 --overwrite --out " + out, dir + "/log") ==
+        0);
+  CHECK(fs::exists(out + "/frame_0002.ply"));
+  CHECK_FALSE(fs::exists(out + "/frame_0003.ply"));  // the earlier run's third frame is gone
+  CHECK_FALSE(fs::exists(out + "/frame_0009.ply.tmp"));
+  CHECK(read_text(out + "/notes.txt") == "mine");  // not the run's: kept
+  const std::string stats = read_text(out + "/stats.csv");
+  CHECK(std::count(stats.begin(), stats.end(), '\n') == 3);
+}
+
+TEST_CASE("command-line numbers that are not finite are refused by option", "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_options");
+  std::string ply = write_file(dir, "p.ply", ascii_ply("x", "0.05"));
+  CHECK(run_grains("cook grains --in " + ply + " --ground nan --out " + dir + "/o", dir + "/log") ==
+        2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains("--ground: 'nan' is not a finite number"));
+  std::string graph = write_file(dir, "g.json", drop("-9.81"));
+  REQUIRE(run_grains("run " + graph + " --quiet --frames 1 --out " + dir + "/f", dir + "/log") ==
+          0);
+  CHECK(run_grains("render " + dir + "/f --size 32x24 --camera 0,1,5,0,0,0,nan", dir + "/log") ==
+        2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains("'nan' is not a finite number"));
+}

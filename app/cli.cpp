@@ -92,11 +92,13 @@ void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
 }
 
 int cmd_run(const std::string& path, const std::string& out_override, int frames_override,
-            int threads, const std::vector<std::string>& sets, bool quiet, bool overwrite) {
+            int threads, const std::vector<std::string>& sets, bool quiet, bool overwrite,
+            size_t max_points) {
   Graph g = load_graph(path, parse_overrides(sets));
   if (frames_override > 0) g.frames = frames_override;
   std::string out = out_override.empty() ? g.output.dir : out_override;
   Simulation sim(g, threads);
+  sim.set_max_points(max_points);
   std::vector<std::string> dirs;
   for (size_t k = 0; k < sim.object_count(); ++k)
     dirs.push_back(sim.object_count() == 1 ? out : out + "/" + sim.object(k).name);
@@ -236,6 +238,7 @@ int cli_main(int argc, char** argv) {
   int frames = 0, threads = 0, substeps = 1, cook_frames = 1;
   bool quiet = false, markdown = false, opencl = false, overwrite = false;
   float ground = 0;
+  size_t max_points = kDefaultMaxPoints;
   std::vector<std::string> sets;
 
   auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
@@ -247,6 +250,9 @@ int cli_main(int argc, char** argv) {
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
   run->add_flag("--quiet", quiet, "print nothing but errors");
+  run->add_option("--max-points", max_points,
+                  "the most points the run may hold (default 20000000, about 12 GB)")
+      ->check(CLI::PositiveNumber);
   run->add_flag("--overwrite", overwrite,
                 "replace the frames and stats.csv an earlier run left in the output folder");
 
@@ -299,7 +305,7 @@ int cli_main(int argc, char** argv) {
         std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
         return kBadInput;
       }
-      return cmd_run(graph_path, out, frames, threads, sets, quiet, overwrite);
+      return cmd_run(graph_path, out, frames, threads, sets, quiet, overwrite, max_points);
     }
     if (validate->parsed()) {
       Graph g = load_graph(graph_path);
@@ -322,6 +328,9 @@ int cli_main(int argc, char** argv) {
     std::fprintf(stderr, "grains: error: %s\n", e.what());
     return kBadInput;
   } catch (const GeometryError& e) {
+    std::fprintf(stderr, "grains: error: %s\n", e.what());
+    return kBadInput;
+  } catch (const BudgetError& e) {
     std::fprintf(stderr, "grains: error: %s\n", e.what());
     return kBadInput;
   } catch (const std::exception& e) {

@@ -1,6 +1,7 @@
 #include "engine/node.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <map>
 
 namespace grains {
@@ -24,6 +25,19 @@ void register_node_type(NodeTypeInfo info) {
 const NodeTypeInfo* find_node_type(const std::string& type) {
   auto it = registry().find(type);
   return it == registry().end() ? nullptr : &it->second;
+}
+
+void check_point_budget(const std::string& node, double adding, size_t have, size_t max,
+                        const std::string& what) {
+  const double total = double(have) + adding;
+  if (total <= double(max)) return;
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "node '%s': %s would bring the points to %.4g, more than the budget of %zu (about "
+                "%.3g GB at %zu B a point); raise it with --max-points",
+                node.c_str(), what.c_str(), total, max, total * double(kBytesPerPoint) / 1e9,
+                kBytesPerPoint);
+  throw BudgetError(buf);
 }
 
 std::vector<const NodeTypeInfo*> node_types() {

@@ -2,9 +2,11 @@
 // parameter table, its role in a chain and a factory. Nodes never read JSON: the evaluator hands
 // them evaluated parameters and the object's particles.
 #pragma once
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -35,6 +37,21 @@ struct ColliderFeedback {
   Vec3 angular_impulse;  // N m s, about the collider's translate (its pose's origin)
 };
 
+// The most points a run may hold (grains run --max-points): an emission that would pass it is
+// refused, with the numbers, before anything is allocated. A point costs about kBytesPerPoint
+// while the grains solve it (BENCHMARKS.md measures 517-730 B a grain).
+constexpr size_t kDefaultMaxPoints = 20000000;
+constexpr size_t kBytesPerPoint = 600;
+
+// An emission past the point budget: bad input (exit 2).
+struct BudgetError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+// Throws BudgetError when `adding` more points on top of `have` would pass `max`; `what` says
+// what was being made ("a box of 1000 x 1000 x 1000 grains").
+void check_point_budget(const std::string& node, double adding, size_t have, size_t max,
+                        const std::string& what);
+
 struct CookContext {
   ParticleStore& pts;
   const ParamSet& params;
@@ -59,6 +76,7 @@ struct CookContext {
   // Error control (solver `error_control`): a grains node raises this to the substep's error,
   // the mean overlap of its touching grains over their summed radii. Null when off.
   float* substep_error = nullptr;
+  size_t max_points = kDefaultMaxPoints;  // the point budget (check_point_budget)
 };
 
 class Node {

@@ -108,6 +108,10 @@ std::string ParamDecl::value_error(double v) const {
   constexpr double kIntMax = 2147483647.0;
   if (type == ParamType::Int && !(std::fabs(v) <= kIntMax))
     return "'" + name + "' must be at most " + exact(kIntMax) + " in size, got " + exact(v);
+  // positions, forces and most other quantities are floats in the solver
+  constexpr double kFloatMax = 3.4028234663852886e38;
+  if ((type == ParamType::Float || type == ParamType::Vec3) && !(std::fabs(v) <= kFloatMax))
+    return "'" + name + "' must be within the float range (3.4e38 in size), got " + exact(v);
   if (has_min && (min_exclusive ? !(v > min) : !(v >= min)))
     return "'" + name + "' must be " + (min_exclusive ? "greater than " : "at least ") +
            exact(min) + ", got " + exact(v);

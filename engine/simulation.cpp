@@ -292,7 +292,8 @@ void Simulation::step_object(SimObject& obj) {
                       &obj.feedback,
                       &obj.feedback_on,
                       &vars,
-                      control ? &substep_error : nullptr};
+                      control ? &substep_error : nullptr,
+                      max_points_};
       checked(c.node, [&] { c.impl->cook(ctx); });  // a node may evaluate its own (target)
       if (const long bad = first_non_finite(pts, check_threads); bad >= 0)
         non_finite_error(pts, bad, d.name, frame_ + 1, s, substeps);

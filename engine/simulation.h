@@ -70,6 +70,8 @@ class Simulation {
  public:
   // threads <= 0: OpenMP's default.
   Simulation(const Graph& graph, int threads = 0);
+  // the point budget the nodes emit under (CookContext::max_points)
+  void set_max_points(size_t n) { max_points_ = n; }
   ~Simulation();
 
   // Replaces an object's points before the first frame (cook_node's starting state).
@@ -94,6 +96,7 @@ class Simulation {
 
   Graph graph_;
   int threads_ = 0;
+  size_t max_points_ = kDefaultMaxPoints;
   int frame_ = 0;
   std::vector<std::unique_ptr<SimObject>> objects_;
   std::vector<int> objects_per_node_;  // NOBJ for each node

@@ -8,8 +8,10 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
+#include <string>
 #include <unordered_map>
 
 #define STB_IMAGE_IMPLEMENTATION
@@ -22,6 +24,13 @@
 
 namespace grains {
 namespace {
+
+// a grain count for a message: whole below 1e15, else in powers of ten
+std::string count_text(double n) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, n < 1e15 ? "%.0f" : "%.3g", n);
+  return buf;
+}
 
 class SourceNode : public Node {
  public:
@@ -41,6 +50,8 @@ class SourceNode : public Node {
       int f = ctx.time.frame;
       if (f < p.i("start_frame") || f > p.i("end_frame")) return;
       carry_ += p.f("rate") * ctx.time.dt;
+      check_point_budget(ctx.node_name, std::floor(carry_), ctx.pts.size(), ctx.max_points,
+                         "emitting " + count_text(p.f("rate")) + " grains a second");
       int count = static_cast<int>(std::floor(carry_));
       carry_ -= count;
       std::vector<Vec3> pts;
@@ -60,6 +71,8 @@ class SourceNode : public Node {
     std::vector<Vec3> out;
     if (shape == "file") {
       file_ = read_ply_or_obj(ctx);
+      check_point_budget(ctx.node_name, double(file_.size()), ctx.pts.size(), ctx.max_points,
+                         "the file's " + std::to_string(file_.size()) + " points");
       const float* P = file_.v3_if("P");
       for (size_t k = 0; k < file_.size(); ++k) out.push_back(load3(P, k) + c);
       return out;
@@ -73,9 +86,14 @@ class SourceNode : public Node {
     if (shape == "grid") size.y = 0;  // a single layer in the xz plane
     // hexagonal close packing: rows offset by s/2, layers by s*sqrt(3)/2 and sqrt(2/3)*s
     float dx = s, dz = hex ? s * std::sqrt(3.0f) / 2 : s, dy = hex ? s * std::sqrt(2.0f / 3.0f) : s;
-    int nx = std::max(1, static_cast<int>(std::floor(size.x / dx + 1e-4f)) + (shape == "grid" ? 1 : 0));
-    int ny = shape == "grid" ? 1 : std::max(1, static_cast<int>(std::floor(size.y / dy + 1e-4f)));
-    int nz = std::max(1, static_cast<int>(std::floor(size.z / dz + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    // counts along each axis, checked against the point budget before any is made
+    const double cx = std::max(1.0, double(std::floor(size.x / dx + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    const double cy = shape == "grid" ? 1.0 : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)));
+    const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    check_point_budget(ctx.node_name, cx * cy * cz, ctx.pts.size(), ctx.max_points,
+                       "a " + shape + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
+                           count_text(cz) + " grains");
+    const int nx = static_cast<int>(cx), ny = static_cast<int>(cy), nz = static_cast<int>(cz);
     Vec3 lo = c - Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
     float jitter = static_cast<float>(p.f("jitter")) * s;
     uint64_t counter = 0;
@@ -114,8 +132,11 @@ class SourceNode : public Node {
       if (channels == 1) return px[0] / 255.0f;
       return (0.299f * px[0] + 0.587f * px[1] + 0.114f * px[2]) / 255.0f;
     };
-    int nx = std::max(1, static_cast<int>(std::floor(size.x / s + 1e-4f)) + 1);
-    int nz = std::max(1, static_cast<int>(std::floor(size.z / s + 1e-4f)) + 1);
+    const double cx = std::max(1.0, double(std::floor(size.x / s + 1e-4f)) + 1);
+    const double cz = std::max(1.0, double(std::floor(size.z / s + 1e-4f)) + 1);
+    check_point_budget(ctx.node_name, cx * cz, ctx.pts.size(), ctx.max_points,
+                       "an image sheet of " + count_text(cx) + " x " + count_text(cz) + " grains");
+    const int nx = static_cast<int>(cx), nz = static_cast<int>(cz);
     Vec3 lo = c - Vec3{(nx - 1) * s, 0, (nz - 1) * s} * 0.5f;
     float threshold = static_cast<float>(ctx.params.f("threshold"));
     std::vector<Vec3> out;

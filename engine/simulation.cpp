@@ -170,7 +170,10 @@ long first_non_finite(const ParticleStore& pts, int threads) {
   const long n = static_cast<long>(pts.size());
   const float* arrays[3] = {pts.v3_if("P"), pts.v3_if("v"), pts.v3_if("force")};
   long first = n;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : first)
+  // serial below 64k points: a parallel region per node per substep cost small scenes with many
+  // substeps (a 50-grain stack) several times their solve on two busy cores
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : first) \
+    if (n > 65536)
   for (long i = 0; i < n; ++i)
     for (const float* a : arrays)
       if (a && !(std::isfinite(a[3 * i]) && std::isfinite(a[3 * i + 1]) &&

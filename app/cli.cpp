@@ -64,6 +64,11 @@ bool run_owns(const std::filesystem::path& p) {
   return stem == "stats.csv" || (stem.starts_with("frame_") && stem.ends_with(".ply"));
 }
 
+LoadError used_folder(const std::string& dir, const std::string& what) {
+  return LoadError(dir, "", "the output folder is not empty (" + what +
+                                "): pass --overwrite to replace its frames, or name another");
+}
+
 // A run's folders must be empty: frames left by an earlier, longer run would be read as this
 // one's. With `overwrite`, what a run owns (run_owns) is removed first and the rest kept.
 void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
@@ -79,11 +84,8 @@ void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
     if (owned.empty() && other.empty()) continue;
     if (!overwrite) {
       const fs::path first = !owned.empty() ? owned.front() : other.front();
-      throw LoadError(dir, "",
-                      "the output folder is not empty (" +
-                          std::to_string(owned.size() + other.size()) + " entries, e.g. " +
-                          first.filename().string() +
-                          "): pass --overwrite to replace its frames, or name another");
+      throw used_folder(dir, std::to_string(owned.size() + other.size()) + " entries, e.g. " +
+                                 first.filename().string());
     }
     for (const fs::path& f : owned)
       if (!fs::remove(f, ec) && ec)
@@ -110,9 +112,7 @@ int cmd_run(const std::string& path, const std::string& out_override, int frames
       for (const auto& e : fs::directory_iterator(out, ec))
         if (std::find(dirs.begin(), dirs.end(), (fs::path(out) / e.path().filename()).string()) ==
             dirs.end())
-          throw LoadError(out, "",
-                          "the output folder is not empty (" + e.path().filename().string() +
-                              "): pass --overwrite to replace its frames, or name another");
+          throw used_folder(out, e.path().filename().string());
   }
   prepare_output(dirs, overwrite);
   std::vector<std::unique_ptr<FrameWriter>> writers;

@@ -61,15 +61,6 @@ struct Loader {
     throw LoadError(file, pointer, msg);
   }
 
-  void check_range(const ParamDecl& d, double v, const std::string& ptr) const {
-    if (d.has_min && (d.min_exclusive ? !(v > d.min) : !(v >= d.min)))
-      fail(ptr, "'" + d.name + "' must be " + (d.min_exclusive ? "greater than " : "at least ") +
-                    json(d.min).dump() + ", got " + json(v).dump());
-    if (d.has_max && !(v <= d.max))
-      fail(ptr, "'" + d.name + "' must be at most " + json(d.max).dump() + ", got " +
-                    json(v).dump());
-  }
-
   ChannelSource channel(const ParamDecl& d, const json& j, const std::vector<std::string>& names,
                         const std::string& ptr) const {
     ChannelSource c;
@@ -79,7 +70,8 @@ struct Loader {
         fail(ptr, "'" + d.name + "' is an integer, got " + j.dump());
       if (d.type == ParamType::Toggle && c.value != 0 && c.value != 1)
         fail(ptr, "'" + d.name + "' is a toggle: true, false, 0, 1 or an expression");
-      check_range(d, c.value, ptr);
+      // finite, within int or float, within the declared range: the same check as a value
+      // from an expression or keys gets when it is evaluated (ParamSet::evaluate)
       if (const std::string bad = d.value_error(c.value); !bad.empty()) fail(ptr, bad);
       return c;
     }

@@ -58,7 +58,7 @@ struct ParamDecl {
   }
   std::string default_text() const;
   // What is wrong with v as this parameter's value ("" when nothing): not a finite number, an
-  // integer beyond int, or outside the declared range. The loader says it of a literal, the
+  // integer beyond int, a float beyond float, or outside the declared range. The loader says it of a literal, the
   // evaluation of a value from an expression or keyframes (ParamRangeError).
   std::string value_error(double v) const;
   // channel names this parameter contributes as local variables (name, or namex namey namez)

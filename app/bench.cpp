@@ -6,6 +6,7 @@
 #include "app/bench.h"
 #include "app/bench_features.h"
 #include "app/bench_run.h"
+#include "app/options.h"
 
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -380,13 +381,16 @@ constexpr int kQuickFrames = 12;
 // ---------------------------------------------------------------------------------------------
 // Sweeps
 
+// An integer from 1 to 2^31 - 1 (a JSON integer past int would wrap in get<int>).
+bool positive_int(const nlohmann::json& j) {
+  if (j.is_number_unsigned()) return j.get<uint64_t>() >= 1 && j.get<uint64_t>() <= INT32_MAX;
+  return j.is_number_integer() && j.get<int64_t>() >= 1 && j.get<int64_t>() <= INT32_MAX;
+}
+
 BenchSetting parse_setting(const nlohmann::json& j, const std::string& file, const std::string& ptr) {
-  if (!j.is_array() || j.size() != 2 || !j[0].is_number_integer() || !j[1].is_number_integer())
-    throw LoadError(file, ptr, "expected [substeps, iterations] (two integers)");
-  BenchSetting s{j[0].get<int>(), j[1].get<int>()};
-  if (s.substeps < 1 || s.iterations < 1)
-    throw LoadError(file, ptr, "substeps and iterations must be at least 1");
-  return s;
+  if (!j.is_array() || j.size() != 2 || !positive_int(j[0]) || !positive_int(j[1]))
+    throw LoadError(file, ptr, "expected [substeps, iterations]: two integers from 1 to 2147483647");
+  return BenchSetting{j[0].get<int>(), j[1].get<int>()};
 }
 
 std::vector<Override> setting_overrides(const BenchSetting& s) {
@@ -767,8 +771,8 @@ BenchSweep load_bench_sweep(const std::string& graph_path) {
   }
   if (j.contains("reference")) s.reference = parse_setting(j["reference"], path, "/reference");
   if (j.contains("frames")) {
-    if (!j["frames"].is_number_integer() || j["frames"].get<int>() < 1)
-      throw LoadError(path, "/frames", "expected a positive integer");
+    if (!positive_int(j["frames"]))
+      throw LoadError(path, "/frames", "expected an integer from 1 to 2147483647");
     s.frames = j["frames"].get<int>();
   }
   return s;
@@ -921,13 +925,13 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o, int argc, char** arg
   b->add_option("--md", o.md_path, "Markdown report to regenerate (default BENCHMARKS.md)");
   b->add_flag("--quick", o.quick, "a reduced sweep that runs in seconds (with --features: at most 12 frames)");
   b->add_option("--frames", o.frames, "frames per run (default: the sweep file's or the graph's)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   b->add_option("--threads", o.threads, "worker threads (default: all cores)")
       ->check(CLI::Range(1, kMaxThreads));
   b->add_option("--repeat", o.repeat,
                 "run every setting this many times, in rounds; report the fastest timings "
                 "(default 1)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   auto* features = b->add_flag(
       "--features", o.features,
       "instead of the sweep: the cost of each grains feature on one scene as written (default "

@@ -3,6 +3,7 @@
 
 #include "app/bench.h"
 #include "app/dem_measures.h"
+#include "app/options.h"
 #include "app/validation.h"
 
 #include <omp.h>
@@ -15,11 +16,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 
 #include "engine/cook.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
+#include "nodes/common.h"
 #include "nodes/register.h"
 #include "viewer-offline/render.h"
 
@@ -29,16 +32,30 @@ namespace {
 constexpr int kBadInput = 2;
 constexpr int kRunFailure = 1;
 
-// A number option that must be finite: CLI11 reads "nan" and "inf" as numbers.
-std::string finite_number(std::string& text) {
+// What is wrong with a floating-point option's text, or "": CLI11 reads "nan" and "inf" as
+// numbers, and the engine computes in float.
+std::string float_option_problem(const std::string& text) {
   try {
     size_t used = 0;
     const double v = std::stod(text, &used);
     if (used != text.size()) return "'" + text + "' is not a number";
-    return std::isfinite(v) ? "" : "'" + text + "' is not a finite number";
+    if (!std::isfinite(v)) return "'" + text + "' is not a finite number";
+    if (std::fabs(v) > std::numeric_limits<float>::max())
+      return "'" + text + "' is beyond the float range";
+    return "";
   } catch (const std::exception&) {
     return "'" + text + "' is not a number";
   }
+}
+
+// Every floating-point option of the parsed (sub)commands passes float_option_problem.
+void check_float_options(const CLI::App& app) {
+  for (const CLI::Option* o : app.get_options())
+    if (o->count() > 0 && o->get_type_name().starts_with("FLOAT"))
+      for (const std::string& text : o->results())
+        if (std::string bad = float_option_problem(text); !bad.empty())
+          throw CLI::ValidationError(o->get_name(), bad);
+  for (const CLI::App* sub : app.get_subcommands()) check_float_options(*sub);
 }
 
 std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
@@ -70,8 +87,10 @@ LoadError used_folder(const std::string& dir, const std::string& what) {
 }
 
 // A run's folders must be empty: frames left by an earlier, longer run would be read as this
-// one's. With `overwrite`, what a run owns (run_owns) is removed first and the rest kept.
-void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
+// one's. With `overwrite`, what a run owns (run_owns) is removed first and the rest kept, unless
+// one of those files is among `inputs` (a source reading an earlier frame): then nothing is.
+void prepare_output(const std::vector<std::string>& dirs, bool overwrite,
+                    const std::vector<std::string>& inputs = {}) {
   namespace fs = std::filesystem;
   for (const std::string& dir : dirs) {
     std::error_code ec;
@@ -88,9 +107,34 @@ void prepare_output(const std::vector<std::string>& dirs, bool overwrite) {
                                  first.filename().string());
     }
     for (const fs::path& f : owned)
+      for (const std::string& in : inputs)
+        if (fs::equivalent(f, in, ec))
+          throw LoadError(in, "", "the graph reads this file, and --overwrite would remove it from "
+                                  "the output folder first: copy it elsewhere");
+    for (const fs::path& f : owned)
       if (!fs::remove(f, ec) && ec)
         throw std::runtime_error(f.string() + ": cannot remove (" + ec.message() + ")");
   }
+}
+
+// The float precision of an object's positions: stated once at its first frame with points
+// (unless quiet), and a warning, always, the first time contacts are resolved no finer than
+// kWarnResolution of the smallest radius (Simulation stops the run at kCoarsestResolution).
+void say_precision(const SimObject& o, bool quiet, int& said) {
+  const FrameStats& s = o.stats;
+  if (said == 2 || s.min_radius <= 0) return;
+  const bool coarse = s.resolution >= kWarnResolution * s.min_radius;
+  if (!coarse && (said == 1 || quiet)) return;
+  std::fprintf(stderr,
+               "%s: solver '%s', frame %d: points reach %.4g m from the origin, where positions "
+               "are resolved to %.3g m, %.3g of the smallest grain radius %.3g m",
+               coarse ? "grains: warning" : "precision", o.name.c_str(), s.frame, s.max_coordinate,
+               s.resolution, s.resolution / s.min_radius, s.min_radius);
+  if (coarse)
+    std::fprintf(stderr, "; contacts are solved no finer than that (within %.4g m they would be)",
+                 precise_reach(s.min_radius, kWarnResolution));
+  std::fputc('\n', stderr);
+  said = coarse ? 2 : 1;
 }
 
 int cmd_run(const std::string& path, const std::string& out_override, int frames_override,
@@ -114,17 +158,23 @@ int cmd_run(const std::string& path, const std::string& out_override, int frames
             dirs.end())
           throw used_folder(out, e.path().filename().string());
   }
-  prepare_output(dirs, overwrite);
+  std::vector<std::string> inputs;  // files the nodes read
+  for (const NodeDesc& d : g.nodes)
+    if (auto it = d.params.find("file"); it != d.params.end() && !it->second.text.empty())
+      inputs.push_back(resolve_path(g.base_dir, it->second.text));
+  prepare_output(dirs, overwrite, inputs);
   std::vector<std::unique_ptr<FrameWriter>> writers;
   for (const std::string& dir : dirs)
     writers.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
   bool tty = isatty(fileno(stderr)) && !quiet;
+  std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
     size_t points = 0;
     double ms = 0;
     for (size_t k = 0; k < sim.object_count(); ++k) {
       const SimObject& o = sim.object(k);
+      say_precision(o, quiet, precision_said[k]);
       writers[k]->write(f, o.pts, o.stats, f % g.output.every == 0);
       points += o.pts.size();
       ms += o.stats.wall_ms;
@@ -187,8 +237,9 @@ void print_nodes(const std::string& only, bool markdown) {
 
 int cmd_cook(const std::string& type, const std::string& in, const std::vector<std::string>& sets,
              int substeps, int frames, bool has_ground, float ground_y, int threads,
-             const std::string& out) {
+             const std::string& out, bool overwrite) {
   ParticleStore pts = read_ply(in);
+  prepare_output({out}, overwrite);
   std::vector<std::pair<std::string, std::string>> params;
   for (const auto& s : sets) {
     auto eq = s.find('=');
@@ -244,7 +295,7 @@ int cli_main(int argc, char** argv) {
   auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
   run->add_option("graph", graph_path, "graph file (JSON)")->required();
   run->add_option("--out", out, "output folder (default: the graph's output.dir)");
-  run->add_option("--frames", frames, "number of frames (default: the graph's)")->check(CLI::PositiveNumber);
+  run->add_option("--frames", frames, "number of frames (default: the graph's)")->check(positive_number());
   run->add_option("--threads", threads, "worker threads (default: all cores)")
       ->check(CLI::Range(1, kMaxThreads));
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
@@ -252,7 +303,7 @@ int cli_main(int argc, char** argv) {
   run->add_flag("--quiet", quiet, "print nothing but errors");
   run->add_option("--max-points", max_points,
                   "the most points the run may hold (default 20000000, about 12 GB)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   run->add_flag("--overwrite", overwrite,
                 "replace the frames and stats.csv an earlier run left in the output folder");
 
@@ -268,12 +319,13 @@ int cli_main(int argc, char** argv) {
   cook->add_option("type", type, "node type")->required();
   cook->add_option("--in", in, "input points (PLY; edges become constraints)")->required();
   cook->add_option("--set", sets, "PARAM=VALUE");
-  cook->add_option("--substeps", substeps, "substeps per frame")->check(CLI::PositiveNumber);
-  cook->add_option("--frames", cook_frames, "frames")->check(CLI::PositiveNumber);
-  auto* ground_opt = cook->add_option("--ground", ground, "add a ground plane at this height")
-                         ->check(CLI::Validator(finite_number, "FINITE"));
+  cook->add_option("--substeps", substeps, "substeps per frame")->check(positive_number());
+  cook->add_option("--frames", cook_frames, "frames")->check(positive_number());
+  auto* ground_opt = cook->add_option("--ground", ground, "add a ground plane at this height");
   cook->add_option("--threads", threads, "worker threads")->check(CLI::Range(1, kMaxThreads));
   cook->add_option("--out", cook_out, "output folder")->required();
+  cook->add_flag("--overwrite", overwrite,
+                 "replace the frames and stats.csv an earlier cook left in the output folder");
 
   BenchOptions bench_opts;
   auto* bench = add_bench_command(app, bench_opts, argc, argv);
@@ -285,7 +337,7 @@ int cli_main(int argc, char** argv) {
   double heap_d = 0, heap_cx = 0, heap_cz = 0;
   auto* heap = app.add_subcommand("heap", "measure the angle of a heap in a frame, as the DEM reference does");
   heap->add_option("frame", heap_frame, "a frame (PLY) written by run")->required();
-  heap->add_option("--d", heap_d, "grain diameter, m (default: twice the median pscale)")->check(CLI::PositiveNumber);
+  heap->add_option("--d", heap_d, "grain diameter, m (default: twice the median pscale)")->check(positive_number());
   heap->add_option("--cx", heap_cx, "x of the heap's axis (m)");
   heap->add_option("--cz", heap_cz, "z of the heap's axis (m)");
 
@@ -294,6 +346,7 @@ int cli_main(int argc, char** argv) {
 
   try {
     app.parse(argc, argv);
+    check_float_options(app);
   } catch (const CLI::ParseError& e) {
     int rc = app.exit(e);
     return rc == 0 ? 0 : kBadInput;
@@ -323,7 +376,7 @@ int cli_main(int argc, char** argv) {
     if (render->parsed()) return viewer::render_command(render_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
-                      threads, cook_out);
+                      threads, cook_out, overwrite);
   } catch (const LoadError& e) {
     std::fprintf(stderr, "grains: error: %s\n", e.what());
     return kBadInput;
@@ -333,7 +386,7 @@ int cli_main(int argc, char** argv) {
   } catch (const BudgetError& e) {
     std::fprintf(stderr, "grains: error: %s\n", e.what());
     return kBadInput;
-  } catch (const std::exception& e) {
+  } catch (const std::exception& e) {  // a non-finite state, a WriteError (disk full), ...
     std::fprintf(stderr, "grains: failed: %s\n", e.what());
     return kRunFailure;
   }

@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "app/dem_measures.h"
+#include "app/options.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
 
@@ -791,12 +792,12 @@ CLI::App* add_validation_command(CLI::App& app, ValidationOptions& o, int argc, 
   c->add_option("--only", o.only, "collapse, silo and/or repose (default: all)")
       ->check(CLI::IsMember({"collapse", "silo", "repose"}));
   c->add_option("--substeps", o.substeps, "substeps of every run (default: the plan's)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   c->add_option("--iterations", o.iterations,
                 "constraint iterations of every run (default: the plan's)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   c->add_option("--friction", o.friction, "friction_with_particles of the collapse and silo runs")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   std::string cmd;
   for (int k = 0; k < argc; ++k) cmd += (k ? " " : "") + std::string(argv[k]);
   o.command = cmd;

@@ -39,15 +39,18 @@ void cook_node(const std::string& type,
             {"frames", opt.frames}, {"seed", opt.seed}, {"nodes", nodes}};
   if (opt.substeps < 1) throw LoadError(opt.source, "--substeps", "must be at least 1");
   if (opt.frames < 1) throw LoadError(opt.source, "--frames", "must be at least 1");
+  // errors point at the parameter as the user wrote it: "--set NAME", not the made graph's pointer
+  auto as_set = [&](const LoadError& e) {
+    std::string ptr = e.pointer;
+    const std::string pre = "/nodes/0/params/";
+    if (ptr.rfind(pre, 0) == 0) ptr = "--set " + ptr.substr(pre.size());
+    return LoadError(opt.source, ptr, e.message);
+  };
   Graph graph;
   try {
     graph = parse_graph(g.dump(), opt.source);
   } catch (const LoadError& e) {
-    // point at the parameter as the user wrote it
-    std::string ptr = e.pointer;
-    const std::string pre = "/nodes/0/params/";
-    if (ptr.rfind(pre, 0) == 0) ptr = "--set " + ptr.substr(pre.size());
-    throw LoadError(opt.source, ptr, e.message);
+    throw as_set(e);
   }
   Simulation sim(graph, opt.threads);
   sim.set_points(0, std::move(state));
@@ -58,7 +61,11 @@ void cook_node(const std::string& type,
     writer = owned.get();
   }
   for (int f = 0; f < opt.frames; ++f) {
-    sim.step_frame();
+    try {  // an expression's value out of range at this frame
+      sim.step_frame();
+    } catch (const LoadError& e) {
+      throw e.file == opt.source ? as_set(e) : e;
+    }
     if (writer) writer->write(sim.frame(), sim.object(0).pts, sim.object(0).stats, true);
   }
   state = std::move(sim.object(0).pts);

@@ -33,6 +33,10 @@ constexpr bool kHostLittle = std::endian::native == std::endian::little;
   throw GeometryError(path + ": " + what);
 }
 
+[[noreturn]] void write_fail(const std::string& path, const std::string& what, int err) {
+  throw WriteError(path + ": " + what + " (" + std::strerror(err) + ")");
+}
+
 // "NaN" or "infinite": what a non-finite number read from a file is called in its error
 const char* non_finite_name(float x) { return std::isnan(x) ? "NaN" : "infinite"; }
 
@@ -149,6 +153,13 @@ struct ElementOut {
   }
 };
 
+// Component k of an interleaved array as a column start; an empty array's null data() takes no
+// offset (null plus k is undefined), and a column of no rows is never read.
+template <class T>
+const T* column(const std::vector<T>& v, size_t k) {
+  return v.empty() ? nullptr : v.data() + k;
+}
+
 // Adds one point attribute (by name) to the vertex element: from the store, or else with its
 // documented default.
 void add_point_attribute(const std::string& path, ElementOut& el, const ParticleStore& pts,
@@ -158,9 +169,9 @@ void add_point_attribute(const std::string& path, ElementOut& el, const Particle
       case AttribType::Float: el.add_float(path, name, a->f.data(), 1); return;
       case AttribType::Int: el.add_int(path, name, a->i.data(), 1); return;
       case AttribType::Vec3:
-        el.add_float(path, name + "_x", a->f.data() + 0, 3);
-        el.add_float(path, name + "_y", a->f.data() + 1, 3);
-        el.add_float(path, name + "_z", a->f.data() + 2, 3);
+        el.add_float(path, name + "_x", column(a->f, 0), 3);
+        el.add_float(path, name + "_y", column(a->f, 1), 3);
+        el.add_float(path, name + "_z", column(a->f, 2), 3);
         return;
     }
   }
@@ -187,7 +198,7 @@ void add_fixed_vertex_columns(const std::string& path, ElementOut& el, const Par
       fail(path, std::string("cannot write: ") + name + " is not a vector attribute");
     for (int c = 0; c < 3; ++c) {
       if (a)
-        el.add_float(path, comps[which][c], a->f.data() + c, 3);
+        el.add_float(path, comps[which][c], column(a->f, c), 3);
       else
         el.add_float_const(path, comps[which][c], 0.0f);
     }
@@ -212,8 +223,8 @@ ElementOut edge_element(const std::string& path, const ParticleStore& pts, bool 
   ElementOut el;
   el.name = "edge";
   el.count = pts.prim_count();
-  el.add_int(path, "vertex1", pts.prim_points().data() + 0, 2);
-  el.add_int(path, "vertex2", pts.prim_points().data() + 1, 2);
+  el.add_int(path, "vertex1", column(pts.prim_points(), 0), 2);
+  el.add_int(path, "vertex2", column(pts.prim_points(), 1), 2);
   for (const char* name : {"restlength", "strain"}) {
     if (const float* p = pts.prim_f_if(name))
       el.add_float(path, name, p, 1);
@@ -238,7 +249,7 @@ void write_elements(const std::string& path, const std::vector<ElementOut>& elem
 
   const std::string tmp = path + ".tmp";
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) fail(path, std::string("cannot write (") + std::strerror(errno) + ")");
+  if (!f) write_fail(path, "cannot write", errno);
   bool ok = std::fwrite(header.data(), 1, header.size(), f) == header.size();
   for (const ElementOut& el : elements) {
     if (!ok) break;
@@ -253,12 +264,12 @@ void write_elements(const std::string& path, const std::vector<ElementOut>& elem
   }
   if (!ok) {
     std::remove(tmp.c_str());
-    fail(path, std::string("cannot write (") + std::strerror(err) + ")");
+    write_fail(path, "cannot write", err);
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     err = errno;
     std::remove(tmp.c_str());
-    fail(path, std::string("cannot rename ") + tmp + " (" + std::strerror(err) + ")");
+    write_fail(path, "cannot rename " + tmp, err);
   }
 }
 
@@ -568,6 +579,8 @@ class PlyReader {
           p.name = tok[2];
         }
         PlyElement& el = elements_.back();
+        // a name the writer could not write back (valid_property_name) is refused here
+        if (!valid_property_name(p.name)) bad("a property name is printable ASCII");
         if (el.find(p.name)) bad("duplicate property '" + p.name + "'");
         el.props.push_back(std::move(p));
       } else {
@@ -648,6 +661,11 @@ std::vector<std::optional<Dest>> map_vertex_properties(const std::string& path,
                      a_type(d->type));
     if (vectors.count(p.name))
       fail(path, "vertex property '" + p.name + "' clashes with the vector " + p.name);
+    // x y z and vx vy vz are the written columns of P and v: never attributes of their own
+    for (const char* set : {"x y z", "vx vy vz"})
+      for (const std::string& c : split_ws(set))
+        if (p.name == c)
+          fail(path, "vertex property '" + p.name + "' comes without the rest of '" + set + "'");
     dest[k] = Dest{p.name, t, 0};
   }
   return dest;
@@ -725,7 +743,8 @@ Mesh read_ply_mesh(const std::string& path) {
         if (k[c] < 0 || el.props[k[c]].is_list) fail(path, "vertex element has no x/y/z properties");
       r.check_remaining(e);
       xyz.assign(el.count * 3, 0.0f);
-      for (int c = 0; c < 3; ++c) {
+      // no vertices: nothing to point into (a null data() plus a component is undefined)
+      for (int c = 0; c < 3 && el.count > 0; ++c) {
         sinks[k[c]].kind = Sink::Float;
         sinks[k[c]].f = xyz.data() + c;
         sinks[k[c]].stride = 3;
@@ -801,8 +820,6 @@ ParticleStore read_ply(const std::string& path) {
   if (vel.count > static_cast<size_t>(std::numeric_limits<int32_t>::max()))
     fail(path, "too many vertices (" + std::to_string(vel.count) + ")");
   EdgeData edges;
-  std::vector<Sink> esinks;
-  if (ei >= 0) esinks = edge_sinks(path, elements[ei], edges);
 
   ParticleStore s;
   const int id_prop = vel.index("id");
@@ -814,7 +831,8 @@ ParticleStore read_ply(const std::string& path) {
         if (d) s.add(d->attr, d->type);
       std::vector<Sink> sinks(vel.props.size());
       for (size_t k = 0; k < dest.size(); ++k) {
-        if (!dest[k]) continue;
+        // no vertices: no arrays to point into (a null data() plus a component is undefined)
+        if (!dest[k] || vel.count == 0) continue;
         Attribute* a = s.find(dest[k]->attr);
         Sink& sk = sinks[k];
         if (dest[k]->type == AttribType::Int) {
@@ -828,7 +846,9 @@ ParticleStore read_ply(const std::string& path) {
       }
       r.read_element(e, sinks);
     } else if (static_cast<int>(e) == ei) {
-      r.read_element(e, esinks);
+      // the edge count is checked against the bytes left before its arrays are allocated
+      r.check_remaining(e);
+      r.read_element(e, edge_sinks(path, elements[ei], edges));
     } else {
       r.read_element(e, skip_sinks(elements[e]));
     }
@@ -952,8 +972,9 @@ Mesh read_obj(const std::string& path) {
   }
   if (in.bad()) fail(path, "read error");
   if (max_line > 0 && static_cast<size_t>(max_index) >= mesh.vertices.size())
-    fail(where(max_line), "face vertex " + std::to_string(max_index + 1) + " is out of range (" +
-                              std::to_string(mesh.vertices.size()) + " vertices)");
+    fail(where(max_line), "face vertex " + std::to_string(int64_t(max_index) + 1) +
+                              " is out of range (" + std::to_string(mesh.vertices.size()) +
+                              " vertices)");
   return mesh;
 }
 

@@ -15,12 +15,19 @@ struct GeometryError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A file could not be written (disk full, quota, I/O error, ...); what() names the file and gives
+// the system's reason. A failure of the run (exit 1), not bad input.
+struct WriteError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // Writes one frame as binary little-endian PLY, DESIGN §6:
 //   element vertex: float x y z, float vx vy vz, float pscale, int id, then each requested attribute
 //     (Float → float NAME, Int → int NAME, Vec3 → float NAME_x NAME_y NAME_z); a requested attribute
 //     that the store lacks is written with its documented default;
 //   element edge: int vertex1 vertex2, float restlength strain (one per primitive).
-// Written to PATH.tmp then renamed, so a killed run never leaves a half-written frame.
+// Written to PATH.tmp then renamed, so a killed run never leaves a half-written frame. Throws
+// WriteError when the system refuses a write.
 void write_ply(const std::string& path, const ParticleStore& pts,
                const std::vector<std::string>& attributes);
 // Same, with every attribute the store holds (used by `grains cook`).

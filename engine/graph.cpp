@@ -3,7 +3,6 @@
 #include <cctype>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -46,12 +45,35 @@ std::string type_of(const json& j) {
   return "an object";
 }
 
-bool plain_name(const std::string& name) {
-  if (name.empty() || name.size() > 100 || name[0] == '.' || name[0] == '-') return false;
+// Names that become folder names (a solver's output folder, a graph's default output folder)
+// must be plain, so that nothing is written outside the folder the user named. Returns what is
+// wrong, or "".
+std::string plain_name_problem(const std::string& what, const std::string& name) {
+  bool plain = !name.empty() && name.size() <= 100 && name[0] != '.' && name[0] != '-';
   for (char c : name)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.'))
-      return false;
-  return true;
+    plain = plain && (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.');
+  if (plain) return "";
+  return "a " + what + " is letters, digits, '_', '-' and '.', not starting with '.' or '-', at " +
+         "most 100 characters; got " + json(name).dump();
+}
+
+// Why a point attribute named in /output/attributes could never be written, or "": it must be a
+// known attribute or one a node adds (NodeTypeInfo::adds_attributes).
+std::string unknown_output_attribute(const Graph& g, const std::string& name) {
+  if (find_known_attribute(name)) return "";
+  for (const NodeDesc& d : g.nodes) {
+    if (!d.info->adds_attributes) continue;
+    ParamSet ps(d.info->params, d.params);
+    ps.evaluate(ExprVars{});
+    for (const std::string& a : d.info->adds_attributes(ps))
+      if (a == name || a == "*") return "";
+  }
+  std::string known;
+  for (const AttribDefault& a : known_point_attributes()) {
+    if (!known.empty()) known += ", ";
+    known += a.name;
+  }
+  return "unknown point attribute '" + name + "': no node adds it and it is none of " + known;
 }
 
 struct Loader {
@@ -187,13 +209,16 @@ struct Loader {
     if (root.contains("name")) {
       if (!root["name"].is_string()) fail("/name", "name is a string");
       g.name = root["name"].get<std::string>();
+      if (std::string bad = plain_name_problem("graph name", g.name); !bad.empty()) fail("/name", bad);
     } else {
       g.name = std::filesystem::path(file).stem().string();
     }
     if (root.contains("fps")) {
       if (!root["fps"].is_number()) fail("/fps", "fps is a number, got " + type_of(root["fps"]));
       g.fps = root["fps"].get<double>();
-      if (!(g.fps > 0)) fail("/fps", "fps must be greater than 0, got " + root["fps"].dump());
+      if (!(g.fps >= kMinFps && g.fps <= kMaxFps))
+        fail("/fps", "fps must lie between " + json(kMinFps).dump() + " and " + json(kMaxFps).dump() +
+                         ", got " + root["fps"].dump());
     }
     if (root.contains("frames")) {
       if (!root["frames"].is_number_integer())
@@ -207,8 +232,9 @@ struct Loader {
       g.frames = static_cast<int>(f);
     }
     if (root.contains("seed")) {
-      if (!root["seed"].is_number_integer() || root["seed"].get<int64_t>() < 0)
-        fail("/seed", "seed is a non-negative integer");
+      const json& seed = root["seed"];
+      if (!seed.is_number_unsigned() && !(seed.is_number_integer() && seed.get<int64_t>() >= 0))
+        fail("/seed", "seed is an integer from 0 to 18446744073709551615");
       g.seed = root["seed"].get<uint64_t>();
     }
     if (!root.contains("nodes") || !root["nodes"].is_array())
@@ -226,8 +252,9 @@ struct Loader {
           } catch (const json::exception&) {
             v = o.value;
           }
-          n["params"][o.param] = v;
           found = true;
+          if (n.contains("params") && !n["params"].is_object()) continue;  // refused below
+          n["params"][o.param] = v;
         }
       if (!found) throw LoadError("--set", "", "no node named '" + o.node + "' in " + file);
     }
@@ -243,13 +270,8 @@ struct Loader {
       NodeDesc d;
       d.name = n["name"].get<std::string>();
       d.pointer = ptr;
-      // a solver's name becomes its output folder: plain names only, so that nothing is written
-      // outside the folder the user named
-      if (!plain_name(d.name))
-        fail(ptr + "/name",
-             "a node name is letters, digits, '_', '-' and '.', not starting with "
-             "'.' or '-', at most 100 characters; got \"" +
-                 d.name + "\"");
+      if (std::string bad = plain_name_problem("node name", d.name); !bad.empty())
+        fail(ptr + "/name", bad);
       if (by_name.count(d.name)) fail(ptr + "/name", "duplicate node name '" + d.name + "'");
       by_name[d.name] = static_cast<int>(k);
       if (!n.contains("type") || !n["type"].is_string()) fail(ptr + "/type", "every node needs a string type");
@@ -301,27 +323,43 @@ struct Loader {
         d.inputs.push_back(it->second);
       }
     }
+    // depth-first, with an explicit stack: a chain may be as long as the file allows
     std::vector<int> state(g.nodes.size(), 0);  // 0 new, 1 on stack, 2 done
-    std::function<void(int)> visit = [&](int k) {
-      state[k] = 1;
-      for (size_t i = 0; i < g.nodes[k].inputs.size(); ++i) {
-        int in = g.nodes[k].inputs[i];
+    std::vector<std::pair<int, size_t>> stack;   // node, next input to visit
+    for (size_t root = 0; root < g.nodes.size(); ++root) {
+      if (state[root] != 0) continue;
+      state[root] = 1;
+      stack.push_back({static_cast<int>(root), 0});
+      while (!stack.empty()) {
+        const int k = stack.back().first;
+        const size_t i = stack.back().second++;
+        if (i == g.nodes[k].inputs.size()) {
+          state[k] = 2;
+          stack.pop_back();
+          continue;
+        }
+        const int in = g.nodes[k].inputs[i];
         if (state[in] == 1)
           fail(g.nodes[k].pointer + "/inputs/" + std::to_string(i),
                "cycle: '" + g.nodes[k].name + "' depends on itself through '" + g.nodes[in].name + "'");
-        if (state[in] == 0) visit(in);
+        if (state[in] == 0) {
+          state[in] = 1;
+          stack.push_back({in, 0});
+        }
       }
-      state[k] = 2;
-    };
-    for (size_t k = 0; k < g.nodes.size(); ++k)
-      if (state[k] == 0) visit(static_cast<int>(k));
+    }
 
     // solvers: colliders named exist; every chain node reaches a solver
     std::vector<char> reaches(g.nodes.size(), 0);
-    std::function<void(int)> mark = [&](int k) {
-      if (reaches[k]) return;
-      reaches[k] = 1;
-      for (int in : g.nodes[k].inputs) mark(in);
+    auto mark = [&](int solver) {
+      std::vector<int> todo = {solver};
+      while (!todo.empty()) {
+        const int k = todo.back();
+        todo.pop_back();
+        if (reaches[k]) continue;
+        reaches[k] = 1;
+        todo.insert(todo.end(), g.nodes[k].inputs.begin(), g.nodes[k].inputs.end());
+      }
     };
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       NodeDesc& d = g.nodes[k];
@@ -371,6 +409,10 @@ struct Loader {
       if (o.contains("every")) {
         if (!o["every"].is_number_integer() || o["every"].get<int64_t>() < 1)
           fail("/output/every", "every is an integer of at least 1");
+        // within int: a larger one would wrap (4294967296 to 0, then f % every divides by 0)
+        if (o["every"].get<int64_t>() > std::numeric_limits<int>::max())
+          fail("/output/every", "every must be at most " +
+                                    std::to_string(std::numeric_limits<int>::max()));
         g.output.every = o["every"].get<int>();
       }
       if (o.contains("attributes")) {
@@ -380,6 +422,8 @@ struct Loader {
           if (!a.is_string() || a.get<std::string>().empty())
             fail("/output/attributes/" + std::to_string(k), "an attribute is a non-empty name");
           g.output.attributes.push_back(a.get<std::string>());
+          if (std::string why = unknown_output_attribute(g, g.output.attributes.back()); !why.empty())
+            fail("/output/attributes/" + std::to_string(k), why);
         }
       }
     } else {
@@ -409,11 +453,15 @@ Graph parse_graph(const std::string& text, const std::string& file,
   json root;
   try {
     root = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     throw LoadError(file, "", std::string("malformed JSON: ") + e.what());
   }
   Loader l{file};
-  return l.load(std::move(root), overrides);
+  try {
+    return l.load(std::move(root), overrides);
+  } catch (const json::exception& e) {  // a shape the checks above missed: still bad input
+    throw LoadError(file, "", std::string("unexpected JSON: ") + e.what());
+  }
 }
 
 Graph load_graph(const std::string& path, const std::vector<Override>& overrides) {

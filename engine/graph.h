@@ -33,6 +33,10 @@ struct OutputDesc {
   std::vector<std::string> attributes;
 };
 
+// Frames per second a graph may ask for: a frame of 1000 s to one of 1 us.
+constexpr double kMinFps = 1e-3;
+constexpr double kMaxFps = 1e6;
+
 struct Graph {
   std::string file;      // path as given
   std::string base_dir;  // folder of the file, for relative paths in parameters

@@ -109,6 +109,10 @@ struct NodeTypeInfo {
   // and the offending parameter name, or an empty message.
   std::function<std::pair<std::string, std::string>(const ParamSet&, const std::string& base_dir)>
       check;
+  // Point attributes outside the known table (known_point_attributes) that the node adds with
+  // these parameters, e.g. a group's group_NAME; "*" when they come from an input file. Loading
+  // refuses an /output/attributes name that no node adds.
+  std::function<std::vector<std::string>(const ParamSet&)> adds_attributes;
 
   const ParamDecl* find_param(const std::string& name) const;
 };

@@ -1,5 +1,6 @@
 #include "engine/particles.h"
 
+#include <cctype>
 #include <stdexcept>
 
 namespace grains {
@@ -36,6 +37,11 @@ const std::vector<AttribDefault>& known_point_attributes() {
       {"targetstiffness", AttribType::Float, {0, 0, 0}, "scales pin stiffness; missing = no pin"},
       {"shockmass", AttribType::Float, {1, 0, 0}, "virtual mass of global mass-shock scaling"},
       {"rest", AttribType::Vec3, {0, 0, 0}, "rest position (m), written by sources"},
+      {"impact", AttribType::Int, {0, 0, 0}, "1 when the grain touched a collider this frame"},
+      {"impactimpulse", AttribType::Float, {0, 0, 0}, "summed collider normal impulse this frame (N s)"},
+      {"impactP", AttribType::Vec3, {0, 0, 0}, "contact point of the strongest impact (m)"},
+      {"impactN", AttribType::Vec3, {0, 0, 0}, "normal of the strongest impact, out of the collider"},
+      {"impactother", AttribType::Int, {-1, 0, 0}, "collider index of the strongest impact; -1 none"},
   };
   return table;
 }
@@ -47,6 +53,14 @@ const AttribDefault* find_known_attribute(std::string_view name) {
 }
 
 std::string group_attribute(std::string_view group) { return "group_" + std::string(group); }
+
+std::string group_name_problem(std::string_view group) {
+  bool plain = !group.empty() && !std::isdigit(static_cast<unsigned char>(group[0]));
+  for (char c : group) plain = plain && (std::isalnum(static_cast<unsigned char>(c)) || c == '_');
+  if (plain) return "";
+  return "a group name is letters, digits and '_', not starting with a digit; got '" +
+         std::string(group) + "'";
+}
 
 ParticleStore::ParticleStore() {
   for (const char* name : {"P", "v", "force", "mass", "pscale", "id", "ispbd"}) add(name);

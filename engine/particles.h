@@ -38,6 +38,9 @@ const std::vector<AttribDefault>& known_point_attributes();
 const AttribDefault* find_known_attribute(std::string_view name);
 
 std::string group_attribute(std::string_view group);  // "group_" + group
+// What is wrong with a group name (it becomes an attribute written to every frame: letters,
+// digits and '_', not starting with a digit), or "".
+std::string group_name_problem(std::string_view group);
 
 class ParticleStore {
  public:

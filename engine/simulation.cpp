@@ -1,12 +1,14 @@
 #include "engine/simulation.h"
 
 #include <omp.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
-#include <functional>
 #include <limits>
 #include <set>
 #include <stdexcept>
@@ -28,18 +30,26 @@ Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads
     obj->objid = static_cast<int>(s);
     obj->solver = solver;
 
-    // chain: post-order from the solver, inputs left to right, each node once
+    // chain: post-order from the solver, inputs left to right, each node once (an explicit
+    // stack: the graph is acyclic, checked at load, and a chain may be long)
     std::vector<char> seen(graph_.nodes.size(), 0);
     std::vector<std::vector<int>> streams(graph_.nodes.size());
-    std::function<void(int)> visit = [&](int k) {
-      if (seen[k]) return;
-      seen[k] = 1;
-      std::set<int> st;
-      for (int in : graph_.nodes[k].inputs) {
-        visit(in);
-        st.insert(streams[in].begin(), streams[in].end());
-      }
+    std::vector<std::pair<int, size_t>> stack = {{solver, 0}};  // node, next input
+    seen[solver] = 1;
+    while (!stack.empty()) {
+      const int k = stack.back().first;
       const NodeDesc& d = graph_.nodes[k];
+      const size_t i = stack.back().second++;
+      if (i < d.inputs.size()) {
+        if (!seen[d.inputs[i]]) {
+          seen[d.inputs[i]] = 1;
+          stack.push_back({d.inputs[i], 0});
+        }
+        continue;
+      }
+      stack.pop_back();
+      std::set<int> st;
+      for (int in : d.inputs) st.insert(streams[in].begin(), streams[in].end());
       if (d.info->role == NodeRole::Source) st = {k};  // a generator starts its own stream
       streams[k].assign(st.begin(), st.end());
       ChainNode c;
@@ -49,8 +59,7 @@ Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads
       c.params = ParamSet(d.info->params, d.params);
       obj->chain.push_back(std::move(c));
       objects_per_node_[k]++;
-    };
-    visit(solver);
+    }
 
     const ParamValue* cl = nullptr;
     auto it = graph_.nodes[solver].params.find("colliders");
@@ -330,6 +339,11 @@ void Simulation::step_object(SimObject& obj) {
                                      obj.feedback[k].angular_impulse * static_cast<float>(graph_.fps)});
 }
 
+double precise_reach(float r, float fraction) {
+  // floats in [2^e, 2^(e+1)) are 2^(e-23) apart: the largest e with 2^(e-23) <= fraction * r
+  return std::ldexp(1.0, static_cast<int>(std::floor(std::log2(double(fraction) * r))) + 24);
+}
+
 void Simulation::step_frame() {
   for (auto& o : objects_) {
     auto t0 = std::chrono::steady_clock::now();
@@ -339,6 +353,18 @@ void Simulation::step_frame() {
     o->stats.time = (frame_ + 1) / graph_.fps;
     measure_frame(o->pts, o->stats);
     o->stats.wall_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    const FrameStats& st = o->stats;
+    if (st.min_radius > 0 && st.resolution >= kCoarsestResolution * st.min_radius) {
+      char buf[400];
+      std::snprintf(buf, sizeof buf,
+                    "frame %d, solver '%s': a point lies %.4g m from the origin, where a float "
+                    "resolves only %.3g m, %.3g times the smallest grain radius %.3g m: grains "
+                    "there cannot be told apart; keep the scene within %.4g m of the origin",
+                    frame_ + 1, o->name.c_str(), st.max_coordinate, st.resolution,
+                    st.resolution / st.min_radius, st.min_radius,
+                    precise_reach(st.min_radius, kCoarsestResolution));
+      throw std::runtime_error(buf);
+    }
   }
   ++frame_;
 }
@@ -464,6 +490,20 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
     ke += 0.5 * (m ? m[k] : 1.0) * dot(vk, vk);
   }
   st.kinetic_energy = ke;
+  // precision: the largest coordinate, the float spacing there, the smallest radius
+  st.max_coordinate = st.min_radius = 0;
+  if (const float* P = pts.v3_if("P"))
+    for (size_t k = 0; k < 3 * n; ++k) st.max_coordinate = std::max(st.max_coordinate, std::fabs(P[k]));
+  st.resolution = std::nextafter(st.max_coordinate, std::numeric_limits<float>::infinity()) -
+                  st.max_coordinate;
+  if (const float* r = pts.f_if("pscale")) {
+    float least = std::numeric_limits<float>::infinity();
+    for (size_t k = 0; k < n; ++k)
+      if (r[k] > 0) least = std::min(least, r[k]);
+    st.min_radius = std::isfinite(least) ? least : 0;
+  } else if (n > 0) {
+    st.min_radius = find_known_attribute("pscale")->value[0];
+  }
   st.max_strain = 0;
   if (const float* strain = pts.prim_f_if("strain"))
     for (size_t p = 0; p < pts.prim_count(); ++p)
@@ -503,18 +543,50 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
   st.mean_penetration = pen.count ? static_cast<float>(pen.sum / pen.count) : 0.0f;
 }
 
+namespace {
+
+// Appends `text` to the file at `path` (created when `fresh`), all of it or nothing: a failed
+// write (disk full, ...) cuts the file back to its old length and throws WriteError.
+void append_text(const std::string& path, const std::string& text, bool fresh) {
+  std::error_code ec;
+  const auto old_size = fresh ? std::uintmax_t(0) : std::filesystem::file_size(path, ec);
+  FILE* f = std::fopen(path.c_str(), fresh ? "w" : "a");
+  if (!f) throw WriteError(path + ": cannot write (" + std::strerror(errno) + ")");
+  bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+  int err = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) {
+    ok = false;
+    err = errno;
+  }
+  if (ok) return;
+  if (!ec) std::filesystem::resize_file(path, old_size, ec);
+  throw WriteError(path + ": cannot write (" + std::strerror(err) + ")");
+}
+
+std::string format(const char* fmt, auto... args) {
+  int n = std::snprintf(nullptr, 0, fmt, args...);
+  std::string out(static_cast<size_t>(n), '\0');
+  std::snprintf(out.data(), out.size() + 1, fmt, args...);
+  return out;
+}
+
+}  // namespace
+
 FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
     : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all) {
-  std::filesystem::create_directories(dir_);
-  std::string path = dir_ + "/stats.csv";
-  FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) throw GeometryError(path + ": cannot write");
-  std::fputs(
-      "frame,time,points,constraints,wall_ms,max_penetration,mean_penetration,max_strain,"
-      "kinetic_energy,substeps,error\n",
-      f);
-  std::fclose(f);
-  std::filesystem::remove(dir_ + "/colliders.csv");  // written from the first frame with feedback
+  // a folder the user named that cannot be made or written in is bad input, refused before any
+  // frame runs; a write that fails later (disk full) is a failure of the run
+  std::error_code ec;
+  std::filesystem::create_directories(dir_, ec);
+  if (ec) throw LoadError(dir_, "", "cannot make the output folder (" + ec.message() + ")");
+  if (access(dir_.c_str(), W_OK | X_OK) != 0)
+    throw LoadError(dir_, "", std::string("cannot write in the output folder (") +
+                                  std::strerror(errno) + ")");
+  append_text(dir_ + "/stats.csv",
+              "frame,time,points,constraints,wall_ms,max_penetration,mean_penetration,max_strain,"
+              "kinetic_energy,substeps,error\n",
+              true);
+  std::filesystem::remove(dir_ + "/colliders.csv", ec);  // written from the first frame with feedback
 }
 
 void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s, bool ply) {
@@ -526,23 +598,19 @@ void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s
     else
       write_ply(dir_ + name, pts, attributes_);
   }
-  std::string path = dir_ + "/stats.csv";
-  FILE* f = std::fopen(path.c_str(), "a");
-  if (!f) throw GeometryError(path + ": cannot write");
-  std::fprintf(f, "%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
-               s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
-               s.max_strain, s.kinetic_energy, s.substeps, s.error);
-  std::fclose(f);
+  append_text(dir_ + "/stats.csv",
+              format("%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
+                     s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
+                     s.max_strain, s.kinetic_energy, s.substeps, s.error),
+              false);
   if (s.colliders.empty()) return;
-  path = dir_ + "/colliders.csv";
-  bool fresh = !std::filesystem::exists(path);
-  f = std::fopen(path.c_str(), fresh ? "w" : "a");
-  if (!f) throw GeometryError(path + ": cannot write");
-  if (fresh) std::fputs("frame,time,collider,fx,fy,fz,tx,ty,tz\n", f);
+  const std::string path = dir_ + "/colliders.csv";
+  const bool fresh = !std::filesystem::exists(path);
+  std::string rows = fresh ? "frame,time,collider,fx,fy,fz,tx,ty,tz\n" : "";
   for (const auto& c : s.colliders)
-    std::fprintf(f, "%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
-                 c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
-  std::fclose(f);
+    rows += format("%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
+                   c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
+  append_text(path, rows, fresh);
 }
 
 }  // namespace grains

@@ -36,7 +36,20 @@ struct FrameStats {
     Vec3 force, torque;
   };
   std::vector<ColliderForce> colliders;
+  // float precision where the points are: the largest |coordinate| (m), the spacing of floats
+  // there (m), and the smallest positive pscale (m; 0 when none)
+  float max_coordinate = 0, resolution = 0, min_radius = 0;
 };
+
+// Positions are floats: at distance x from the origin they are resolved to the float spacing
+// there, 2^(floor(log2 x) - 23) (1 m at 1e7 m). A frame whose resolution reaches
+// kCoarsestResolution of the smallest grain radius stops the run (grains there cannot be told
+// apart: a pile collapses onto a few positions); past kWarnResolution `run` warns, since contacts
+// are then solved no finer than that.
+constexpr float kCoarsestResolution = 0.1f;
+constexpr float kWarnResolution = 1e-3f;
+// The largest distance from the origin at which floats resolve `fraction` of radius r.
+double precise_reach(float r, float fraction);
 
 // One chain entry: a node instance with its parameters, evaluated per substep.
 struct ChainNode {

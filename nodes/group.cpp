@@ -84,10 +84,14 @@ void register_group_node() {
   };
   t.make = [] { return std::make_unique<GroupNode>(); };
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
-    if (p.s("group_name").empty()) return {"group_name must not be empty", "group_name"};
+    if (std::string bad = group_name_problem(p.s("group_name")); !bad.empty())
+      return {bad, "group_name"};
     if (p.s("rule") == "attribute" && p.s("attribute").empty())
       return {"rule \"attribute\" needs an `attribute`", "attribute"};
     return {"", ""};
+  };
+  t.adds_attributes = [](const ParamSet& p) {
+    return std::vector<std::string>{group_attribute(p.s("group_name"))};
   };
   register_node_type(std::move(t));
 }

@@ -124,8 +124,11 @@ class SourceNode : public Node {
   std::vector<Vec3> image_sheet(CookContext& ctx, const Vec3& c, const Vec3& size, float s) {
     std::string path = resolve_path(ctx.base_dir, ctx.params.s("file"));
     int w = 0, h = 0, channels = 0;
+    if (std::string bad = input_file_problem(path, kMaxGeometryFileBytes); !bad.empty())
+      throw GeometryError(path + ": " + bad);
     unsigned char* img = stbi_load(path.c_str(), &w, &h, &channels, 0);
-    if (!img) throw std::runtime_error("source: cannot read image " + path + ": " + stbi_failure_reason());
+    if (!img)
+      throw GeometryError(path + ": not an image the source can read (" + stbi_failure_reason() + ")");
     auto coverage = [&](int x, int y) {
       const unsigned char* px = img + (static_cast<size_t>(y) * w + x) * channels;
       if (channels == 2 || channels == 4) return px[channels - 1] / 255.0f;
@@ -340,7 +343,16 @@ void register_source_node() {
       std::string path = resolve_path(base, p.s("file"));
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
     }
+    if (!p.s("group").empty())
+      if (std::string bad = group_name_problem(p.s("group")); !bad.empty()) return {bad, "group"};
     return {"", ""};
+  };
+  // its group's attribute; a file's own point attributes are known only once it is read
+  t.adds_attributes = [](const ParamSet& p) {
+    std::vector<std::string> out;
+    if (!p.s("group").empty()) out.push_back(group_attribute(p.s("group")));
+    if (p.s("shape") == "file") out.push_back("*");
+    return out;
   };
   register_node_type(std::move(t));
 }

@@ -20,6 +20,7 @@
 #include <set>
 #include <sstream>
 
+#include "app/options.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
@@ -51,8 +52,11 @@ std::map<int, std::string> frames_in(const fs::path& dir) {
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     std::smatch m;
     std::string f = e.path().filename().string();
-    if (e.is_regular_file() && std::regex_match(f, m, name))
-      out[std::stoi(m[1])] = e.path().string();
+    if (!e.is_regular_file() || !std::regex_match(f, m, name)) continue;
+    const std::string digits = m[1];
+    if (digits.size() > 10 || std::stoll(digits) > std::numeric_limits<int>::max())
+      throw BadInput(e.path().string() + ": the frame number is past 2147483647");
+    out[std::stoi(digits)] = e.path().string();
   }
   return out;
 }
@@ -159,7 +163,7 @@ struct GraphColliders {
     ParamSet params;
     std::string object;  // the first solver that lists it, for $OBJNAME
   };
-  std::string graph_name;
+  std::string graph_file, graph_name;
   double fps = 24;
   std::vector<Entry> entries;
 
@@ -175,7 +179,12 @@ struct GraphColliders {
       v.F = v.SF + 1;
       v.OBJNAME = e.object;
       v.DOPNET = graph_name;
-      e.params.evaluate(v);
+      try {
+        e.params.evaluate(v);
+      } catch (const ParamRangeError& err) {  // the message `run` gives for the same graph
+        throw LoadError(graph_file, e.node->pointer + "/params/" + err.param,
+                        "frame " + std::to_string(static_cast<long long>(v.F)) + ": " + err.what());
+      }
       ColliderState c;
       e.node->info->collider(e.params, c);
       c.name = e.node->name;
@@ -377,6 +386,7 @@ int run(const RenderOptions& opts) {
     register_builtin_nodes();
     graph = load_graph(opts.graph);
     fps = graph.fps;
+    colliders.graph_file = opts.graph;
     colliders.graph_name = graph.name;
     for (const NodeDesc& node : graph.nodes) {
       if (!node.info || node.info->role != NodeRole::Collider || !node.info->collider) continue;
@@ -430,7 +440,7 @@ int run(const RenderOptions& opts) {
 
   std::error_code ec;
   fs::create_directories(out, ec);
-  if (ec) throw std::runtime_error(out + ": cannot create the folder: " + ec.message());
+  if (ec) throw BadInput(out + ": cannot make the output folder (" + ec.message() + ")");
   if (!opts.video.empty()) {
     video = std::make_unique<VideoSink>(opts.video, W, H, fps);
   }
@@ -542,7 +552,7 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
   r->add_option("--size", o.size, "image size WxH (default 960x540)");
   r->add_option("--fps", o.fps,
                 "frames per second for times and the video (default: the graph's, else 24)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   r->add_option("--supersample", o.supersample, "samples per pixel along each axis (default 2)")
       ->check(CLI::Range(1, 4));
   r->add_option("--threads", o.threads, "worker threads (default: all cores)")

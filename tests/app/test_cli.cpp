@@ -61,7 +61,7 @@ TEST_CASE("bad input exits with 2 and says where", "[cli]") {
   std::string dir = temp_dir("cli_bad");
   std::string bad = write_file(dir, "bad.json", std::string(kGraph).replace(std::string(kGraph).find("\"fps\": 24"), 9, "\"fps\": 0"));
   CHECK(run_grains("validate " + bad, dir + "/log") == 2);
-  CHECK_THAT(read_text(dir + "/log"), Catch::Contains(bad + ": /fps: fps must be greater than 0"));
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains(bad + ": /fps: fps must lie between 0.001 and 1000000.0"));
   CHECK(run_grains("run " + bad + " --out " + dir + "/o", dir + "/log") == 2);
   CHECK_FALSE(fs::exists(dir + "/o"));  // refused before any frame
   CHECK(run_grains("run " + dir + "/missing.json", dir + "/log") == 2);

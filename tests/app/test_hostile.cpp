@@ -89,8 +89,13 @@ TEST_CASE("forces beyond the float range stop the run instead of writing infinit
     std::string graph = write_file(dir, "g.json", drop(c.force, c.drag));
     INFO(c.force << " drag " << c.drag);
     CHECK(run_grains("run " + graph + " --out " + dir + "/out --quiet", dir + "/log") == c.rc);
-    CHECK_THAT(read_text(dir + "/log"),
-               Catch::Contains(c.rc == 1 ? "is not finite" : "/nodes/1/params/force"));
+    // a drag of 1e30 flings the grains past 1e25 m within a frame: the precision check
+    // (grains that far cannot be told apart) or the finiteness check stops the run first
+    if (c.rc == 1)
+      CHECK_THAT(read_text(dir + "/log"),
+                 Catch::Contains("is not finite") || Catch::Contains("cannot be told apart"));
+    else
+      CHECK_THAT(read_text(dir + "/log"), Catch::Contains("/nodes/1/params/force"));
     if (fs::exists(dir + "/out"))
       for (auto& e : fs::directory_iterator(dir + "/out")) {
         if (e.path().extension() != ".ply") continue;
@@ -289,4 +294,122 @@ TEST_CASE("emission past the point budget is refused with the numbers before all
   std::string graph = write_file(dir, "g.json", drop("-9.81"));
   CHECK(run_grains("run " + graph + " --quiet --frames 1 --max-points 27 --out " + dir + "/o",
                    dir + "/log") == 0);
+}
+
+TEST_CASE("an output attribute no node makes is refused by validate with its pointer",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_attributes");
+  const std::string kOutput = "\"output\": {\"dir\": \"unused\"}";
+  auto graph_with = [&](const std::string& attributes, const std::string& extra_node) {
+    std::string text = drop("-9.81");
+    text.replace(text.find(kOutput), kOutput.size(),
+                 "\"output\": {\"dir\": \"unused\", \"attributes\": [" + attributes + "]}");
+    if (!extra_node.empty()) {  // between the force and the solver
+      text.replace(text.find("{\"name\": \"ground\""), 0, extra_node + ",\n  ");
+      text.replace(text.find("[\"push\"], \"params\": {\"substeps\""), 8, "[\"g\"]");
+    }
+    return write_file(dir, "g.json", text);
+  };
+  CHECK(run_grains("validate " + graph_with("\"mass\", \"colour\"", ""), dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("/output/attributes/1: unknown point attribute 'colour'") &&
+                 Catch::Contains("pscale"));
+  // a group's attribute exists once a group node makes it; impact data and known names pass
+  const std::string group =
+      R"({"name": "g", "type": "group", "inputs": ["push"], "params": {"group_name": "top"}})";
+  CHECK(run_grains("validate " + graph_with("\"group_top\"", ""), dir + "/log") == 2);
+  CHECK(run_grains("validate " + graph_with("\"group_top\", \"impactN\", \"age\"", group),
+                   dir + "/log") == 0);
+  // a source that reads a file may hold any attribute: checked when its first frame is written
+  write_file(dir, "p.ply", ascii_ply("x", "0.1"));
+  std::string text = drop("-9.81");
+  text.replace(text.find("\"shape\": \"box\""), 14, "\"shape\": \"file\", \"file\": \"p.ply\"");
+  text.replace(text.find(kOutput), kOutput.size(),
+               "\"output\": {\"dir\": \"unused\", \"attributes\": [\"colour\"]}");
+  std::string file_graph = write_file(dir, "f.json", text);
+  CHECK(run_grains("validate " + file_graph, dir + "/log") == 0);
+  CHECK(run_grains("run " + file_graph + " --quiet --out " + dir + "/o", dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains("cannot write attribute 'colour'"));
+}
+
+TEST_CASE("far from the origin the run states its precision, warns, then refuses with numbers",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_far");
+  auto run_at = [&](const std::string& x) {
+    std::string text = drop("-9.81");
+    text.replace(text.find("\"center\": [0, 1, 0]"), 19, "\"center\": [" + x + ", 1, 0]");
+    std::string graph = write_file(dir, "g.json", text);
+    fs::remove_all(dir + "/o");
+    return run_grains("run " + graph + " --frames 2 --out " + dir + "/o", dir + "/log");
+  };
+  // grains of radius 0.05 m: floats resolve 1.2e-7 m at 1.1 m, 6.1e-5 m at 1000 m (above a
+  // thousandth of the radius), 1 m at 1e7 m (20 radii: a pile would fall onto a few positions)
+  CHECK(run_at("0") == 0);
+  std::string log = read_text(dir + "/log");
+  CHECK_THAT(log, Catch::Contains("precision: solver 's', frame 1: points reach 1.091 m from the "
+                                  "origin, where positions are resolved to 1.19e-07 m"));
+  CHECK(log.find("warning") == std::string::npos);
+  CHECK(run_at("1000") == 0);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("grains: warning: solver 's', frame 1: points reach 1000 m") &&
+                 Catch::Contains("resolved to 6.1e-05 m, 0.00122 of the smallest grain radius "
+                                 "0.05 m") &&
+                 Catch::Contains("within 512 m they would be"));
+  CHECK(run_at("1e7") == 1);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("frame 1, solver 's': a point lies 1e+07 m from the origin, where a "
+                             "float resolves only 1 m, 20 times the smallest grain radius 0.05 m") &&
+                 Catch::Contains("within 6.554e+04 m"));
+  CHECK_FALSE(fs::exists(dir + "/o/frame_0001.ply"));
+}
+
+TEST_CASE("a write the system refuses ends the run with exit 1 and its reason, frames kept",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_full");
+  // ten grains a frame: frames grow by 320 bytes; a file-size limit of 1.5 KB (ulimit -f 3, in
+  // 512-byte blocks) refuses a frame's write as a full disk would, with SIGXFSZ ignored
+  std::string text = drop("-9.81");
+  text.replace(text.find("\"separation\": 0.1"), 17,
+               "\"separation\": 0.1, \"emission\": \"rate\", \"rate\": 240");
+  text.replace(text.find("\"frames\": 4"), 11, "\"frames\": 12");
+  std::string graph = write_file(dir, "g.json", text);
+  std::string out = dir + "/out";
+  const std::string cmd = "sh -c 'trap \"\" XFSZ; ulimit -f 3; exec " + std::string(GRAINS_BINARY) +
+                          " run " + graph + " --quiet --out " + out + "' > " + dir + "/log 2>&1";
+  int rc = std::system(cmd.c_str());
+  REQUIRE(WIFEXITED(rc));
+  CHECK(WEXITSTATUS(rc) == 1);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("grains: failed: " + out + "/frame_00") &&
+                 Catch::Contains(": cannot write (File too large)"));
+  // every frame written is whole and has its stats row; nothing half-written stays
+  int frames = 0;
+  while (fs::exists(out + "/frame_" + std::string(frames + 1 < 10 ? "000" : "00") +
+                    std::to_string(frames + 1) + ".ply"))
+    ++frames;
+  CHECK(frames >= 1);
+  CHECK(frames < 12);
+  for (int f = 1; f <= frames; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "/frame_%04d.ply", f);
+    CHECK(read_ply(out + name).size() == size_t(10 * f));
+  }
+  const std::string stats = read_text(out + "/stats.csv");
+  CHECK(std::count(stats.begin(), stats.end(), '\n') == frames + 1);
+  CHECK(stats.back() == '\n');
+  for (const auto& e : fs::directory_iterator(out)) CHECK(e.path().extension() != ".tmp");
+}
+
+TEST_CASE("an output folder that cannot be made is refused before any frame, with the reason",
+          "[cli][hostile]") {
+  std::string dir = temp_dir("hostile_unwritable");
+  std::string graph = write_file(dir, "g.json", drop("-9.81"));
+  write_file(dir, "plain", "a file");
+  CHECK(run_grains("run " + graph + " --quiet --out " + dir + "/plain/x", dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains(dir + "/plain/x: cannot make the output folder (Not a directory)"));
+  write_file(dir, "p.ply", ascii_ply("x", "0.1"));
+  CHECK(run_grains("cook grains --in " + dir + "/p.ply --out " + dir + "/plain/x", dir + "/log") ==
+        2);
+  CHECK_THAT(read_text(dir + "/log"), Catch::Contains("cannot make the output folder"));
 }

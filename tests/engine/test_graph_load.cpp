@@ -70,9 +70,13 @@ TEST_CASE("missing grains_graph", "[graph][bad]") {
   check_error(replace(kGood, "\"grains_graph\": 1,", ""), "/grains_graph", "not a grains graph");
 }
 
-TEST_CASE("zero or negative fps", "[graph][bad]") {
-  check_error(replace(kGood, "\"fps\": 24", "\"fps\": 0"), "/fps", "greater than 0");
-  check_error(replace(kGood, "\"fps\": 24", "\"fps\": -24"), "/fps", "greater than 0");
+TEST_CASE("fps out of its range: zero, negative, a frame of over 1000 s or under 1 us",
+          "[graph][bad]") {
+  for (const char* fps : {"0", "-24", "1e-300", "0.0009", "1e308", "1000001"})
+    check_error(replace(kGood, "\"fps\": 24", std::string("\"fps\": ") + fps), "/fps",
+                "fps must lie between 0.001 and 1000000.0, got ");
+  for (const char* fps : {"0.001", "1e6"})
+    CHECK_NOTHROW(graph_from(replace(kGood, "\"fps\": 24", std::string("\"fps\": ") + fps)));
 }
 
 TEST_CASE("zero or negative frames", "[graph][bad]") {

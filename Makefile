@@ -3,7 +3,8 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 GRAINS := $(BUILD)/grains
 
-.PHONY: deps configure build demo test bench bench-features clean format
+.PHONY: deps configure build demo test bench bench-features clean format \
+        fuzz-build fuzz-short fuzz test-sanitize
 
 deps:
 	bash scripts/install-deps.sh
@@ -22,6 +23,37 @@ demo: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	$(MAKE) fuzz-short
+
+# libFuzzer targets (fuzz/, docs/fuzzing.md), built with clang in their own folder.
+# fuzz-short (part of test): each target FUZZ_SHORT_SECONDS from its corpus; fails on a finding.
+# fuzz: the longer run, FUZZ_SECONDS per target (default 10 minutes each); FUZZ_TARGETS narrows it.
+FUZZ_BUILD ?= build-fuzz
+FUZZ_CXX ?= clang++-14
+FUZZ_SHORT_SECONDS ?= 25
+FUZZ_SECONDS ?= 600
+FUZZ_TARGETS ?= graph expression ply obj
+
+fuzz-build: deps
+	cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_CXX_COMPILER=$(FUZZ_CXX) -DCMAKE_BUILD_TYPE=Fuzz -DGRAINS_FUZZ=ON
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzzers
+
+fuzz-short: fuzz-build
+	bash fuzz/run.sh $(FUZZ_SHORT_SECONDS) $(FUZZ_BUILD) $(FUZZ_TARGETS)
+
+fuzz: fuzz-build
+	bash fuzz/run.sh $(FUZZ_SECONDS) $(FUZZ_BUILD) $(FUZZ_TARGETS)
+
+# The whole test suite under address and undefined-behaviour sanitizers (g++, -O1) in build-asan.
+# Not part of test: it takes far longer than CI's budget (about 2 hours on two cores).
+# Any sanitizer report fails the test that printed it.
+ASAN_BUILD ?= build-asan
+test-sanitize: deps
+	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DGRAINS_SANITIZE=ON
+	cmake --build $(ASAN_BUILD) -j $(JOBS)
+	cd $(ASAN_BUILD) && ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:abort_on_error=1 \
+	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ctest --output-on-failure -j $(JOBS)
 
 bench: build
 	$(GRAINS) bench --out out/bench
@@ -30,7 +62,7 @@ bench-features: build
 	$(GRAINS) bench --features --out out/bench
 
 clean:
-	rm -rf $(BUILD) out
+	rm -rf $(BUILD) $(FUZZ_BUILD) $(ASAN_BUILD) out
 
 format:
 	find engine nodes app tests bench viewer-offline -name '*.cpp' -o -name '*.h' | xargs clang-format -i

@@ -169,13 +169,18 @@ class SourceNode : public Node {
     float R = factor * static_cast<float>(p.f("separation"));
     if (!(R > 0) || end - first < 2) return;
     const float* P = s.v3("P");
+    // clamped before the cast and hashed unsigned: a tiny connect_radius makes x / R overflow
+    // int64 and the hash products overflow (both undefined; UBSan in the catalogue's
+    // crash_connect_radius_1e_30); the clamped cells only cost a longer search
+    auto cell = [&](float c) {
+      return static_cast<int64_t>(std::clamp(std::floor(double(c) / R), -1e15, 1e15));
+    };
     auto cell_of = [&](const Vec3& x) {
-      return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(x.x / R)),
-                                    static_cast<int64_t>(std::floor(x.y / R)),
-                                    static_cast<int64_t>(std::floor(x.z / R))};
+      return std::array<int64_t, 3>{cell(x.x), cell(x.y), cell(x.z)};
     };
     auto key = [](int64_t x, int64_t y, int64_t z) {
-      return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
+      return static_cast<int64_t>((uint64_t(x) * 73856093u) ^ (uint64_t(y) * 19349663u) ^
+                                  (uint64_t(z) * 83492791u));
     };
     std::unordered_map<int64_t, std::vector<uint32_t>> grid;
     for (size_t i = first; i < end; ++i) {

@@ -3,31 +3,16 @@
 // GeometryError is the documented answer to a bad file; anything else is a finding.
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
-#include <exception>
 
 #include "engine/geometry_io.h"
-#include "fuzz/input_file.h"
+#include "fuzz/fuzz.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace grains;
   const std::string& path = grains_fuzz::write_input(data, size, ".ply");
-  try {
-    ParticleStore pts = read_ply(path);
-    (void)pts;
-  } catch (const GeometryError&) {
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuzz_ply: read_ply: unexpected exception: %s\n", e.what());
-    std::abort();
-  }
-  try {
-    Mesh m = read_mesh(path);
-    (void)m;
-  } catch (const GeometryError&) {
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuzz_ply: read_mesh: unexpected exception: %s\n", e.what());
-    std::abort();
-  }
+  grains_fuzz::only_documented_errors<GeometryError>("fuzz_ply: read_ply",
+                                                     [&] { (void)read_ply(path); });
+  grains_fuzz::only_documented_errors<GeometryError>("fuzz_ply: read_mesh",
+                                                     [&] { (void)read_mesh(path); });
   return 0;
 }

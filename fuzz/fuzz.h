@@ -1,4 +1,5 @@
-// Writes a fuzz input to a temporary file, for readers that take a path (engine/geometry_io.h).
+// What the fuzz targets share: each accepts only its reader's documented error, and the readers
+// that take a path get the input through a temporary file.
 #pragma once
 #include <unistd.h>
 
@@ -6,10 +7,24 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <string>
 
 namespace grains_fuzz {
+
+// Runs f. The documented error (Documented) is the right answer to bad bytes; any other
+// exception is a finding: printed with `what`, then abort() so that libFuzzer keeps the input.
+template <class Documented, class F>
+void only_documented_errors(const char* what, F&& f) {
+  try {
+    f();
+  } catch (const Documented&) {
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: unexpected exception: %s\n", what, e.what());
+    std::abort();
+  }
+}
 
 // A file named NAME.EXT in /dev/shm (memory) when it exists, else the temporary folder; one per
 // process, so parallel fuzzing jobs do not share it. Rewritten on every call.

@@ -35,17 +35,11 @@ constexpr int kRunFailure = 1;
 // What is wrong with a floating-point option's text, or "": CLI11 reads "nan" and "inf" as
 // numbers, and the engine computes in float.
 std::string float_option_problem(const std::string& text) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used != text.size()) return "'" + text + "' is not a number";
-    if (!std::isfinite(v)) return "'" + text + "' is not a finite number";
-    if (std::fabs(v) > std::numeric_limits<float>::max())
-      return "'" + text + "' is beyond the float range";
-    return "";
-  } catch (const std::exception&) {
-    return "'" + text + "' is not a number";
-  }
+  double v = 0;
+  if (std::string bad = finite_number_problem(text, v); !bad.empty()) return bad;
+  if (std::fabs(v) > std::numeric_limits<float>::max())
+    return "'" + text + "' is beyond the float range";
+  return "";
 }
 
 // Every floating-point option of the parsed (sub)commands passes float_option_problem.

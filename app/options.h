@@ -8,17 +8,23 @@
 
 namespace grains {
 
-// The option's text as a number at least (or above) `least`: what is wrong, or "".
-inline std::string number_at_least(const std::string& text, double least, bool strictly) {
+// The option's text as a finite number into v: what is wrong, or "".
+inline std::string finite_number_problem(const std::string& text, double& v) {
   try {
     size_t used = 0;
-    const double v = std::stod(text, &used);
+    v = std::stod(text, &used);
     if (used != text.size()) return "'" + text + "' is not a number";
-    if (!std::isfinite(v)) return "'" + text + "' is not a finite number";
-    if (strictly ? v > least : v >= least) return "";
   } catch (const std::exception&) {
     return "'" + text + "' is not a number";
   }
+  return std::isfinite(v) ? "" : "'" + text + "' is not a finite number";
+}
+
+// The option's text as a number at least (or above) `least`: what is wrong, or "".
+inline std::string number_at_least(const std::string& text, double least, bool strictly) {
+  double v = 0;
+  if (std::string bad = finite_number_problem(text, v); !bad.empty()) return bad;
+  if (strictly ? v > least : v >= least) return "";
   return "'" + text + "' must be " + (strictly ? "greater than " : "at least ") +
          (least == 0 ? "0" : std::to_string(least));
 }

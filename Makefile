@@ -3,7 +3,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 GRAINS := $(BUILD)/grains
 
-.PHONY: deps configure build demo test bench bench-features clean format \
+.PHONY: deps configure build demo test docs bench bench-features clean format \
         fuzz-build fuzz-short fuzz test-sanitize
 
 deps:
@@ -24,6 +24,12 @@ demo: build
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	$(MAKE) fuzz-short
+
+# The node reference and the graph schema, generated from the node types' parameter tables
+# (a test fails when the committed copies are stale).
+docs: build
+	$(GRAINS) nodes --markdown > docs/nodes.md
+	$(GRAINS) schema > docs/graph.schema.json
 
 # libFuzzer targets (fuzz/, docs/fuzzing.md), built with clang in their own folder.
 # fuzz-short (part of test): each target FUZZ_SHORT_SECONDS from its corpus; fails on a finding.
@@ -50,7 +56,7 @@ fuzz: fuzz-build
 ASAN_BUILD ?= build-asan
 test-sanitize: deps
 	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DGRAINS_SANITIZE=ON
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DGRAINS_SANITIZE=ON "-DGRAINS_TEST_GLOB=tests/*.cpp"
 	cmake --build $(ASAN_BUILD) -j $(JOBS)
 	cd $(ASAN_BUILD) && ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:abort_on_error=1 \
 	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ctest --output-on-failure -j $(JOBS)

@@ -202,7 +202,12 @@ struct Loader {
     g.file = file;
     g.base_dir = std::filesystem::path(file).parent_path().string();
     if (!root.is_object()) fail("", "the graph must be a JSON object");
-    allow_keys(*this, root, "", {"grains_graph", "name", "fps", "frames", "seed", "nodes", "output"});
+    allow_keys(*this, root, "",
+               {"$schema", "grains_graph", "name", "fps", "frames", "seed", "nodes", "output"});
+    // "$schema": the JSON Schema an editor checks the file with (docs/graph.schema.json); the
+    // loader does not read it
+    if (root.contains("$schema") && !root["$schema"].is_string())
+      fail("/$schema", "$schema is a string (the path or address of graph.schema.json)");
     if (!root.contains("grains_graph")) fail("/grains_graph", "missing: this file is not a grains graph");
     if (!root["grains_graph"].is_number_integer() || root["grains_graph"].get<int64_t>() != 1)
       fail("/grains_graph", "unsupported version " + root["grains_graph"].dump() + " (expected 1)");

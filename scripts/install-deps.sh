@@ -8,6 +8,8 @@ packages=(
   libeigen3-dev nlohmann-json3-dev libspdlog-dev libfmt-dev catch2
   libmuparser-dev libcli11-dev libstb-dev libtbb-dev
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd
+  # the graph schema's test checks the examples with an independent validator
+  python3 python3-jsonschema
   # the fuzz targets (make fuzz-short, part of make test): clang 14, its libFuzzer and sanitizer
   # runtimes, its OpenMP, and llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14

@@ -223,11 +223,11 @@ int main(int argc, char** argv) {
   g.nbr_indices = rows.indices.data();
   gr_params prm;
   std::memset(&prm, 0, sizeof prm);
-  prm.repulsion_weight = 1.0f;
-  prm.repulsion_stiffness = 1000.0f;
+  prm.internal_collisions_weight = 1.0f;
+  prm.internal_collisions_stiffness = 1000.0f;
   prm.stiffness_denominator = float(o.iterations);
   prm.over_relaxation = 1.0f;
-  prm.query_scale = o.query_scale;
+  prm.neighbor_query_scale = o.query_scale;
   prm.friction_with_particles = 1.0f;
   const float repulse = gr_repulsion_scale(&g, &prm, 0);
 

@@ -1,5 +1,6 @@
 #include "engine/params.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -65,6 +66,21 @@ ParamDecl ParamDecl::List(std::string name, std::string doc) {
   ParamDecl d = String(std::move(name), "", std::move(doc));
   d.type = ParamType::StringList;
   return d;
+}
+
+ParamDecl ParamDecl::Choice(std::string name, int def, std::string doc) {
+  ParamDecl d = Menu(std::move(name), {}, "", std::move(doc));
+  d.def[0] = def;
+  return d;
+}
+ParamDecl& ParamDecl::menu_of(std::vector<std::string> choices) {
+  type = ParamType::Menu;
+  menu = std::move(choices);
+  const int k = static_cast<int>(def[0]);
+  if (k < 0 || k >= static_cast<int>(menu.size()))
+    throw std::logic_error("'" + name + "': default choice " + std::to_string(k) + " is not in its menu");
+  def_string = menu[k];
+  return *this;
 }
 
 static std::string num(double v) {
@@ -157,6 +173,12 @@ ParamSet::ParamSet(const std::vector<ParamDecl>& decls,
       if (it != given.end()) e.list = it->second.list;
     } else {
       e.text = it != given.end() ? it->second.text : d.def_string;
+      if (d.type == ParamType::Menu) {
+        auto at = std::find(d.menu.begin(), d.menu.end(), e.text);
+        // the loader refused any other text
+        if (at == d.menu.end()) throw std::logic_error("'" + d.name + "': \"" + e.text + "\" is not in its menu");
+        e.choice = static_cast<int>(at - d.menu.begin());
+      }
     }
     entries_[d.name] = std::move(e);
   }
@@ -218,6 +240,7 @@ const std::string& ParamSet::s(const std::string& name) const {
     throw std::logic_error("parameter '" + name + "' is not a string");
   return it->second.text;
 }
+int ParamSet::choice(const std::string& name) const { return get(name, ParamType::Menu).choice; }
 const std::vector<std::string>& ParamSet::list(const std::string& name) const {
   return get(name, ParamType::StringList).list;
 }

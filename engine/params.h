@@ -45,12 +45,17 @@ struct ParamDecl {
   static ParamDecl Menu(std::string name, std::vector<std::string> choices, std::string def,
                         std::string doc);
   static ParamDecl List(std::string name, std::string doc);
+  // a menu whose default is its choice number def (the choices come with menu_of): for tables
+  // that give the default as the enum value the node reads with ParamSet::choice
+  static ParamDecl Choice(std::string name, int def, std::string doc);
   // modifiers
   ParamDecl& range(double lo, double hi) { has_min = has_max = true; min = lo; max = hi; return *this; }
   ParamDecl& at_least(double lo) { has_min = true; min = lo; return *this; }
   ParamDecl& positive() { has_min = true; min = 0; min_exclusive = true; return *this; }
   ParamDecl& unit(std::string u) { units = std::move(u); return *this; }
   ParamDecl& scaled_by(std::string a) { scale_attribute = std::move(a); return *this; }
+  // a Choice's menu; its default becomes the choice numbered def[0]
+  ParamDecl& menu_of(std::vector<std::string> choices);
 
   bool animatable() const {
     return type == ParamType::Float || type == ParamType::Int || type == ParamType::Toggle ||
@@ -101,6 +106,9 @@ class ParamSet {
   bool b(const std::string& name) const;
   Vec3 v3(const std::string& name) const;
   const std::string& s(const std::string& name) const;
+  // a menu's choice as its number in the declaration's menu (resolved when the set is made,
+  // so nodes compare enums, not strings)
+  int choice(const std::string& name) const;
   const std::vector<std::string>& list(const std::string& name) const;
   bool is_animated(const std::string& name) const;
   bool authored(const std::string& name) const { return authored_.count(name) != 0; }
@@ -111,6 +119,7 @@ class ParamSet {
     std::vector<Channel> channels;
     double value[3] = {0, 0, 0};
     std::string text;
+    int choice = 0;  // Menu: text's number in decl->menu
     std::vector<std::string> list;
   };
   const Entry& get(const std::string& name, ParamType expect) const;

@@ -11,11 +11,10 @@ std::string resolve_path(const std::string& base_dir, const std::string& path) {
   return (std::filesystem::path(base_dir) / p).string();
 }
 
-bool inside_region(const std::string& shape, const Vec3& c, const Vec3& size, float radius,
-                   const Vec3& p) {
+bool inside_region(Region shape, const Vec3& c, const Vec3& size, float radius, const Vec3& p) {
   Vec3 d = p - c;
-  if (shape == "sphere") return dot(d, d) <= radius * radius;
-  if (shape == "cylinder")
+  if (shape == Region::Sphere) return dot(d, d) <= radius * radius;
+  if (shape == Region::Cylinder)
     return d.x * d.x + d.z * d.z <= radius * radius && std::fabs(d.y) <= size.y * 0.5f;
   return std::fabs(d.x) <= size.x * 0.5f && std::fabs(d.y) <= size.y * 0.5f &&
          std::fabs(d.z) <= size.z * 0.5f;

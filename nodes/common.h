@@ -21,9 +21,10 @@ inline float rand01(uint64_t seed, uint64_t counter) {
 // Resolves a path relative to the graph's folder.
 std::string resolve_path(const std::string& base_dir, const std::string& path);
 
-// Region test shared by group and kill: "box" (center, full size), "sphere" (center, radius) or
-// "cylinder" (vertical: axis along y through center, radius, height size.y; kill only).
-bool inside_region(const std::string& shape, const Vec3& center, const Vec3& size, float radius,
-                   const Vec3& p);
+// Region test shared by group and kill: a box (center, full size), a sphere (center, radius) or
+// a cylinder (vertical: axis along y through center, radius, height size.y; kill only). In the
+// order of kill's `shape` menu.
+enum class Region { Box, Sphere, Cylinder };
+bool inside_region(Region shape, const Vec3& center, const Vec3& size, float radius, const Vec3& p);
 
 }  // namespace grains

@@ -9,13 +9,20 @@
 namespace grains {
 namespace {
 
-bool compare(const std::string& op, double a, double b) {
-  if (op == "<") return a < b;
-  if (op == "<=") return a <= b;
-  if (op == ">") return a > b;
-  if (op == ">=") return a >= b;
-  if (op == "==") return a == b;
-  return a != b;
+// the menus' choices, in their order
+enum Rule { kRuleBox, kRuleSphere, kRuleAttribute };
+enum Compare { kLess, kLessEqual, kGreater, kGreaterEqual, kEqual, kNotEqual };
+enum Operation { kReplace, kAdd, kIntersect, kSubtract };
+
+bool compare(int op, double a, double b) {
+  switch (op) {
+    case kLess: return a < b;
+    case kLessEqual: return a <= b;
+    case kGreater: return a > b;
+    case kGreaterEqual: return a >= b;
+    case kEqual: return a == b;
+    default: return a != b;
+  }
 }
 
 class GroupNode : public Node {
@@ -25,13 +32,13 @@ class GroupNode : public Node {
     if (p.f("activation") <= 0) return;
     ParticleStore& s = ctx.pts;
     const std::string& name = p.s("group_name");
-    const std::string& rule = p.s("rule");
-    const std::string& op = p.s("operation");
+    const int rule = p.choice("rule"), op = p.choice("operation"), cmp = p.choice("compare");
+    const Region region = rule == kRuleSphere ? Region::Sphere : Region::Box;
     int32_t* g = s.i(group_attribute(name));
     const float* P = s.v3("P");
     const Attribute* attr = nullptr;
     int comp = 0;
-    if (rule == "attribute") {
+    if (rule == kRuleAttribute) {
       std::string an = p.s("attribute");
       auto us = an.rfind('_');
       attr = s.find(an);
@@ -47,17 +54,17 @@ class GroupNode : public Node {
     double value = p.f("value");
     for (uint32_t k : ctx.members) {
       bool hit;
-      if (rule == "attribute") {
+      if (rule == kRuleAttribute) {
         double a = attr->type == AttribType::Int ? attr->i[k]
                    : attr->type == AttribType::Float ? attr->f[k]
                                                      : attr->f[3 * k + comp];
-        hit = compare(p.s("compare"), a, value);
+        hit = compare(cmp, a, value);
       } else {
-        hit = inside_region(rule, c, size, radius, load3(P, k));
+        hit = inside_region(region, c, size, radius, load3(P, k));
       }
-      if (op == "replace") g[k] = hit ? 1 : 0;
-      else if (op == "add") g[k] = (g[k] || hit) ? 1 : 0;
-      else if (op == "intersect") g[k] = (g[k] && hit) ? 1 : 0;
+      if (op == kReplace) g[k] = hit ? 1 : 0;
+      else if (op == kAdd) g[k] = (g[k] || hit) ? 1 : 0;
+      else if (op == kIntersect) g[k] = (g[k] && hit) ? 1 : 0;
       else g[k] = (g[k] && !hit) ? 1 : 0;  // subtract
     }
   }
@@ -86,7 +93,7 @@ void register_group_node() {
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
     if (std::string bad = group_name_problem(p.s("group_name")); !bad.empty())
       return {bad, "group_name"};
-    if (p.s("rule") == "attribute" && p.s("attribute").empty())
+    if (p.choice("rule") == kRuleAttribute && p.s("attribute").empty())
       return {"rule \"attribute\" needs an `attribute`", "attribute"};
     return {"", ""};
   };

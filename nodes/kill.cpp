@@ -16,10 +16,11 @@ class KillNode : public Node {
     Vec3 c = p.v3("center"), size = p.v3("size");
     float radius = static_cast<float>(p.f("radius"));
     bool invert = p.b("invert");
+    const auto shape = static_cast<Region>(p.choice("shape"));  // the menu is in Region's order
     std::vector<uint8_t> dead(s.size(), 0);
     bool any = false;
     for (uint32_t k : ctx.members) {
-      bool in = inside_region(p.s("shape"), c, size, radius, load3(P, k));
+      bool in = inside_region(shape, c, size, radius, load3(P, k));
       if (in != invert) dead[k] = 1, any = true;
     }
     if (any) s.remove_points(dead);

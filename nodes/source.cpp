@@ -32,19 +32,23 @@ std::string count_text(double n) {
   return buf;
 }
 
+// the menus' choices, in their order
+enum Shape { kBox, kSphere, kGrid, kFile, kImage };
+enum Emission { kOnce, kRate };
+enum Packing { kCubic, kHexagonal };
+
 class SourceNode : public Node {
  public:
   void cook(CookContext& ctx) override {
     const ParamSet& p = ctx.params;
     if (p.f("activation") <= 0) return;
-    const std::string& mode = p.s("emission");
-    if (mode == "once") {
+    if (p.choice("emission") == kOnce) {
       if (emitted_ || ctx.time.frame != p.i("birth_frame") || ctx.time.substep != 0) return;
       emitted_ = true;
       std::vector<Vec3> pts = fill(ctx);
       size_t first = ctx.pts.size();
       emit(ctx, pts);
-      if (p.s("shape") == "file") copy_file_attributes(ctx, first);
+      if (p.choice("shape") == kFile) copy_file_attributes(ctx, first);
       connect(ctx, first);
     } else {  // rate
       int f = ctx.time.frame;
@@ -66,10 +70,10 @@ class SourceNode : public Node {
   // Points filling the shape at the separation; grid or hexagonal close packing.
   std::vector<Vec3> fill(CookContext& ctx) {
     const ParamSet& p = ctx.params;
-    const std::string& shape = p.s("shape");
+    const int shape = p.choice("shape");
     Vec3 c = p.v3("center");
     std::vector<Vec3> out;
-    if (shape == "file") {
+    if (shape == kFile) {
       file_ = read_ply_or_obj(ctx);
       check_point_budget(ctx.node_name, double(file_.size()), ctx.pts.size(), ctx.max_points,
                          "the file's " + std::to_string(file_.size()) + " points");
@@ -79,19 +83,19 @@ class SourceNode : public Node {
     }
     float s = static_cast<float>(p.f("separation"));
     Vec3 size = p.v3("size");
-    if (shape == "image") return image_sheet(ctx, c, size, s);
+    if (shape == kImage) return image_sheet(ctx, c, size, s);
     float radius = static_cast<float>(p.f("radius"));
-    bool hex = p.s("packing") == "hexagonal";
-    if (shape == "sphere") size = Vec3{2 * radius, 2 * radius, 2 * radius};
-    if (shape == "grid") size.y = 0;  // a single layer in the xz plane
+    bool hex = p.choice("packing") == kHexagonal;
+    if (shape == kSphere) size = Vec3{2 * radius, 2 * radius, 2 * radius};
+    if (shape == kGrid) size.y = 0;  // a single layer in the xz plane
     // hexagonal close packing: rows offset by s/2, layers by s*sqrt(3)/2 and sqrt(2/3)*s
     float dx = s, dz = hex ? s * std::sqrt(3.0f) / 2 : s, dy = hex ? s * std::sqrt(2.0f / 3.0f) : s;
     // counts along each axis, checked against the point budget before any is made
-    const double cx = std::max(1.0, double(std::floor(size.x / dx + 1e-4f)) + (shape == "grid" ? 1 : 0));
-    const double cy = shape == "grid" ? 1.0 : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)));
-    const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (shape == "grid" ? 1 : 0));
+    const double cx = std::max(1.0, double(std::floor(size.x / dx + 1e-4f)) + (shape == kGrid ? 1 : 0));
+    const double cy = shape == kGrid ? 1.0 : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)));
+    const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (shape == kGrid ? 1 : 0));
     check_point_budget(ctx.node_name, cx * cy * cz, ctx.pts.size(), ctx.max_points,
-                       "a " + shape + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
+                       "a " + p.s("shape") + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
                            count_text(cz) + " grains");
     const int nx = static_cast<int>(cx), ny = static_cast<int>(cy), nz = static_cast<int>(cz);
     Vec3 lo = c - Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
@@ -110,7 +114,7 @@ class SourceNode : public Node {
                       rand01(ctx.seed, counter + 2) - 0.5f} * jitter;
           }
           counter += 3;
-          if (shape == "sphere" && length(q - c) > radius) continue;
+          if (shape == kSphere && length(q - c) > radius) continue;
           out.push_back(q);
         }
     return out;
@@ -163,7 +167,7 @@ class SourceNode : public Node {
   void connect(CookContext& ctx, size_t first) {
     const ParamSet& p = ctx.params;
     float factor = static_cast<float>(p.f("connect_radius"));
-    if (factor == 0 && p.s("shape") == "image") factor = 1.5f;  // image sheets come connected
+    if (factor == 0 && p.choice("shape") == kImage) factor = 1.5f;  // image sheets come connected
     ParticleStore& s = ctx.pts;
     const size_t end = s.size();
     float R = factor * static_cast<float>(p.f("separation"));
@@ -220,14 +224,14 @@ class SourceNode : public Node {
     Vec3 c = p.v3("center");
     uint64_t k = 3 * counter_++;
     Vec3 u{rand01(ctx.seed, k), rand01(ctx.seed, k + 1), rand01(ctx.seed, k + 2)};
-    if (p.s("shape") == "sphere") {  // uniform in the ball by rejection-free radius scaling
+    if (p.choice("shape") == kSphere) {  // uniform in the ball by rejection-free radius scaling
       float r = static_cast<float>(p.f("radius")) * std::cbrt(u.x);
       float z = 2 * u.y - 1, phi = 2 * static_cast<float>(M_PI) * u.z;
       float q = std::sqrt(std::max(0.0f, 1 - z * z));
       return c + Vec3{q * std::cos(phi), z, q * std::sin(phi)} * r;
     }
     Vec3 size = p.v3("size");
-    if (p.s("shape") == "grid") size.y = 0;
+    if (p.choice("shape") == kGrid) size.y = 0;
     return c + Vec3{(u.x - 0.5f) * size.x, (u.y - 0.5f) * size.y, (u.z - 0.5f) * size.z};
   }
 
@@ -343,7 +347,7 @@ void register_source_node() {
   };
   t.make = [] { return std::make_unique<SourceNode>(); };
   t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
-    if (p.s("shape") == "file" || p.s("shape") == "image") {
+    if (p.choice("shape") == kFile || p.choice("shape") == kImage) {
       if (p.s("file").empty()) return {"shape \"" + p.s("shape") + "\" needs a `file`", "file"};
       std::string path = resolve_path(base, p.s("file"));
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
@@ -356,7 +360,7 @@ void register_source_node() {
   t.adds_attributes = [](const ParamSet& p) {
     std::vector<std::string> out;
     if (!p.s("group").empty()) out.push_back(group_attribute(p.s("group")));
-    if (p.s("shape") == "file") out.push_back("*");
+    if (p.choice("shape") == kFile) out.push_back("*");
     return out;
   };
   register_node_type(std::move(t));

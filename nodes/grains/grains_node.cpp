@@ -27,10 +27,10 @@ namespace {
 class GrainsNode : public Node {
  public:
   void cook(CookContext& ctx) override {
-    const ParamSet& p = ctx.params;
-    if (p.f("activation") <= 0) return;
+    const GrainsSettings st = settings(ctx.params, ctx);
+    if (st.activation <= 0) return;
     ParticleStore& s = ctx.pts;
-    const std::string& group = p.s("group");
+    const std::string& group = st.group;
     const int32_t* g = group.empty() ? nullptr : s.i_if(group_attribute(group));
     if (!group.empty() && !g) return;  // the group does not exist yet: no member
     idx_.clear();
@@ -39,7 +39,6 @@ class GrainsNode : public Node {
     size_t n = idx_.size();
     if (n == 0) return;
 
-    GrainsSettings st = settings(p, ctx);
     float half_sep = st.particle_separation * 0.5f;
     // the solver's order: cell order at the start of each frame, or whenever the grains
     // (their ids, in store order) change; between, the same order, so that the solver may keep
@@ -73,12 +72,12 @@ class GrainsNode : public Node {
     d.repulsionstiffness = optional(s, "repulsionstiffness", rs_);
     d.attractionweight = optional(s, "attractionweight", aw_);
     d.attractionstiffness = optional(s, "attractionstiffness", as_);
-    if (st.mass_shock == MassShock::Global) {
+    if (st.mass_shock() == MassShock::Global) {
       shock_.assign(n, 1.0f);
       d.shockmass = shock_.data();
     }
     // explicit constraints, and rigid shape matching's connectivity: the gathered primitives
-    if (st.constraint_weight > 0 || st.rigid_shape_matching) gather_constraints(s, d);
+    if (st.explicit_constraints_weight > 0 || st.enable_rigid_shape_matching) gather_constraints(s, d);
     // ids: rigid shape matching's rest shapes and the solver's contact history follow them
     ids_.resize(n);
     for (size_t k = 0; k < n; ++k) ids_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
@@ -93,7 +92,7 @@ class GrainsNode : public Node {
         tp_.assign(3 * n, 0.0f);  // the attribute's default: the origin
       d.targetP = tp_.data();
     }
-    const bool impacts = p.b("add_impact_data"), feedback = p.b("enable_collision_feedback");
+    const bool impacts = st.add_impact_data, feedback = st.enable_collision_feedback;
     const size_t K = GrainsSolver::kContactSlots;
     if ((impacts || feedback) && !ctx.colliders.empty()) {
       imp_j_.assign(3 * K * n, 0.0f);
@@ -141,56 +140,24 @@ class GrainsNode : public Node {
   }
 
  private:
+  // The table's rows (kernels/param_table.h) evaluated, and the moment's substep.
   GrainsSettings settings(const ParamSet& p, const CookContext& ctx) const {
     GrainsSettings st;
+#define GR_READ_FLOAT(name) static_cast<float>(p.f(#name))
+#define GR_READ_INT(name) p.i(#name)
+#define GR_READ_TOGGLE(name) p.b(#name)
+#define GR_READ_VECTOR(name) p.v3(#name)
+#define GR_READ_MENU(name) p.choice(#name)
+#define GR_READ_STRING(name) p.s(#name)
+#define GR_PARAM(kind, name, def, home, modifiers, meaning) st.name = GR_READ_##kind(name);
+#include "nodes/grains/kernels/param_table.h"
+#undef GR_PARAM
     st.dt = static_cast<float>(ctx.time.dt);
     // stiffness fractions k / (substeps x iterations) count the solver's own substeps, so a
     // stiffness means the same whatever error control adds
     st.substeps = ctx.time.base_substeps;
     st.keep_velocity = ctx.time.stabilize;
     st.threads = ctx.threads;
-    st.constraint_iterations = p.i("constraint_iterations");
-    st.particle_separation = static_cast<float>(p.f("particle_separation"));
-    st.assume_uniform_radius = p.b("assume_uniform_radius");
-    st.friction_with_colliders = static_cast<float>(p.f("friction_with_colliders"));
-    st.friction_with_particles = static_cast<float>(p.f("friction_with_particles"));
-    st.accurate_friction = p.b("accurate_friction");
-    st.static_threshold = static_cast<float>(p.f("static_threshold"));
-    st.scale_kinetic = static_cast<float>(p.f("scale_kinetic"));
-    st.repulsion_weight = static_cast<float>(p.f("internal_collisions_weight"));
-    st.repulsion_stiffness = static_cast<float>(p.f("internal_collisions_stiffness"));
-    st.mass_shock = !p.b("enable_mass_shock_scaling") ? MassShock::Off
-                    : p.s("mass_shock_method") == "global" ? MassShock::Global
-                                                           : MassShock::Local;
-    st.shock_scaling_power = static_cast<float>(p.f("shock_scaling_power"));
-    st.shock_axis = p.v3("shock_axis");
-    st.shock_origin = p.v3("shock_origin");
-    st.clumping_weight = static_cast<float>(p.f("clumping_weight"));
-    st.clumping_stiffness = static_cast<float>(p.f("clumping_stiffness"));
-    st.constraint_weight = static_cast<float>(p.f("explicit_constraints_weight"));
-    st.constraint_stiffness = static_cast<float>(p.f("explicit_constraints_stiffness"));
-    st.collide_mutually_constrained = p.b("collide_mutually_constrained_particles");
-    st.instantaneous_strain = p.b("instantaneous_strain");
-    st.strain_decay = static_cast<float>(p.f("strain_decay"));
-    st.break_constraints = p.b("break_constraints");
-    st.break_threshold = static_cast<float>(p.f("break_threshold"));
-    st.remove_strands = p.b("remove_strands");
-    st.max_neighbors = p.i("max_neighbors");
-    st.neighbor_query_scale = static_cast<float>(p.f("neighbor_query_scale"));
-    st.max_speed = static_cast<float>(p.f("max_speed"));
-    st.max_acceleration = static_cast<float>(p.f("max_acceleration"));
-    st.drift_threshold = static_cast<float>(p.f("drift_threshold"));
-    st.velocity_blend = static_cast<float>(p.f("velocity_blend"));
-    st.over_relaxation = static_cast<float>(p.f("over_relaxation"));
-    st.chebyshev_rho = static_cast<float>(p.f("chebyshev_rho"));
-    st.pre_stabilization = p.b("pre_stabilization");
-    st.update_collisions_during_iterations = p.b("update_collisions_during_iterations");
-    st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
-    st.final_collision_test = p.b("final_collision_test");
-    st.disable_constraint_averaging = p.b("disable_constraint_averaging");
-    st.target_weight = static_cast<float>(p.f("target_weight"));
-    st.target_stiffness = static_cast<float>(p.f("target_stiffness"));
-    st.rigid_shape_matching = p.b("enable_rigid_shape_matching");
     return st;
   }
 
@@ -354,78 +321,15 @@ void register_grains_node() {
   t.reports_error = true;
   t.doc = "POP Grains: position-based dynamics for grains (contacts, friction, colliders, mass-shock, clumping, explicit constraints, pins, rigid shape matching, impact data, collision feedback).";
   t.params = {
-      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
-      ParamDecl::String("group", "", "act only on this point group of the stream (empty: the whole stream)"),
-      ParamDecl::Float("particle_separation", 0.1,
-                       "mean grain diameter hint: radius of points without pscale, mass-shock length scale").positive().unit("m"),
-      ParamDecl::Int("constraint_iterations", 10, "Jacobi iterations per substep; about twice the stacking height").at_least(1),
-      ParamDecl::Toggle("assume_uniform_radius", true, "search every grain as the largest one, with one grid cell size: faster; for grains of one size"),
-      ParamDecl::Float("friction_with_colliders", 1, "grain-collider Coulomb friction: a lab mu is this with static_threshold 1 and scale_kinetic 1")
-          .at_least(0).scaled_by("friction"),
-      ParamDecl::Float("friction_with_particles", 1, "grain-grain Coulomb friction: static mu = this x static_threshold, kinetic mu = this x scale_kinetic")
-          .at_least(0).scaled_by("friction"),
-      ParamDecl::Toggle("accurate_friction", true, "apply friction after every iteration instead of once after the loop"),
-      ParamDecl::Float("static_threshold", 1, "static friction: slip under this x friction x the contact's normal correction in the substep is removed").at_least(0),
-      ParamDecl::Float("scale_kinetic", 0.5, "kinetic friction: beyond it, a substep removes at most this x friction x the normal correction").at_least(0),
-      ParamDecl::Float("internal_collisions_weight", 1, "weight of grain-grain collisions; 0 disables them")
-          .range(0, 2).scaled_by("repulsionweight"),
-      ParamDecl::Float("internal_collisions_stiffness", 1000, "stiffness of grain-grain collisions; full at substeps x iterations")
-          .at_least(0).scaled_by("repulsionstiffness"),
-      ParamDecl::Toggle("enable_mass_shock_scaling", false, "make higher grains lighter so stacks converge faster"),
-      ParamDecl::Menu("mass_shock_method", {"global", "local"}, "global",
-                      "global: write shockmass before iterating; local: pair mass ratio on the fly (power clamped near 7)"),
-      ParamDecl::Float("shock_scaling_power", 1, "0: no ratio; 1: a 15% ratio between two stacked grains").at_least(0),
-      ParamDecl::Vector("shock_axis", {0, 1, 0}, "up vector of the mass gradient (against gravity)"),
-      ParamDecl::Vector("shock_origin", {0, 0, 0}, "rough centre of the grains; far grains clamp to min/max mass").unit("m"),
-      ParamDecl::Float("clumping_weight", 0, "weight of the pull between nearby grains; 0 disables clumping")
-          .range(0, 2).scaled_by("attractionweight"),
-      ParamDecl::Float("clumping_stiffness", 100, "stiffness of clumping").at_least(0).scaled_by("attractionstiffness"),
-      ParamDecl::Float("explicit_constraints_weight", 1,
-                       "weight of the distance constraints of 2-point primitives (restlength); 0 skips them entirely")
-          .range(0, 2).scaled_by("constraintweight"),
-      ParamDecl::Float("explicit_constraints_stiffness", 1000,
-                       "stiffness of explicit constraints; full at substeps x iterations")
-          .at_least(0).scaled_by("constraintstiffness"),
-      ParamDecl::Toggle("collide_mutually_constrained_particles", false,
-                        "let constrained pairs collide too (needs them apart at rest)"),
-      ParamDecl::Toggle("instantaneous_strain", true,
-                        "strain = (length - restlength) / restlength at the end of each substep; off: it accumulates "
-                        "each substep's change and fades at strain_decay"),
-      ParamDecl::Float("strain_decay", 1, "rate at which accumulated strain fades (instantaneous_strain off)")
-          .at_least(0).unit("1/s"),
-      ParamDecl::Toggle("break_constraints", false, "remove a constraint once |strain| exceeds strength x break_threshold"),
-      ParamDecl::Float("break_threshold", 0.05, "strain that breaks a constraint of strength 1 (0.05: 5% stretch)")
-          .positive(),
-      ParamDecl::Toggle("remove_strands", false,
-                        "remove chain-only constraints (both endpoints with at most 2 constraints), until none is left"),
-      ParamDecl::Int("max_neighbors", 32, "most neighbour candidates kept per grain (nearest first)").at_least(1),
-      ParamDecl::Float("neighbor_query_scale", 1.5, "candidates closer than this times the summed radii; also the clumping range")
-          .at_least(1),
-      ParamDecl::Float("max_speed", 1e6, "cap on the reported speed (positions are not limited)").positive().unit("m/s"),
-      ParamDecl::Float("max_acceleration", 1e6, "cap on the velocity change constraints cause").positive().unit("m/s^2"),
-      ParamDecl::Float("drift_threshold", 0, "grains slower than this stay where they were").at_least(0).unit("m/s"),
-      ParamDecl::Float("velocity_blend", 0, "blend of the new velocity with the predicted one").range(0, 1),
-      ParamDecl::Float("over_relaxation", 1, "scale of the averaged corrections; above 1 converges faster").range(0, 2),
-      ParamDecl::Float("chebyshev_rho", 0,
-                       "Chebyshev acceleration of the iterations after the first 5 (not in POP Grains): the estimated "
-                       "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
-          .range(0, 0.95),
-      ParamDecl::Toggle("pre_stabilization", true,
-                        "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)"),
-      ParamDecl::Toggle("update_collisions_during_iterations", false, "re-find collider planes every iteration"),
-      ParamDecl::Toggle("update_neighbors_during_iterations", false, "re-find neighbours every iteration"),
-      ParamDecl::Toggle("final_collision_test", true, "a swept collision pass after the loop: no leaks through thin or moving colliders"),
-      ParamDecl::Toggle("disable_constraint_averaging", false, "sum corrections instead of averaging them (momentum-preserving)"),
-      ParamDecl::Float("target_weight", 1, "weight of the pull toward targetP; 0 disables pins")
-          .range(0, 2).scaled_by("targetweight"),
-      ParamDecl::Float("target_stiffness", 1000, "stiffness of pins; full at substeps x iterations; no targetstiffness attribute = no pin")
-          .at_least(0).scaled_by("targetstiffness"),
-      ParamDecl::Toggle("enable_rigid_shape_matching", false,
-                        "keep each connected component (grains joined by 2-point primitives) a best-fit rigid placement of its rest shape"),
-      ParamDecl::Toggle("add_impact_data", false,
-                        "write impact, impactP, impactN, impactimpulse (N s), impactother (collider index) for collider contacts"),
-      ParamDecl::Toggle("enable_collision_feedback", false,
-                        "accumulate the force and torque the grains put on each collider (DIR/colliders.csv)"),
+#define GR_DECL_FLOAT(name, def, meaning) ParamDecl::Float(#name, def, meaning)
+#define GR_DECL_INT(name, def, meaning) ParamDecl::Int(#name, def, meaning)
+#define GR_DECL_TOGGLE(name, def, meaning) ParamDecl::Toggle(#name, def, meaning)
+#define GR_DECL_VECTOR(name, def, meaning) ParamDecl::Vector(#name, Vec3{GR_UNPAREN def}, meaning)
+#define GR_DECL_MENU(name, def, meaning) ParamDecl::Choice(#name, def, meaning)
+#define GR_DECL_STRING(name, def, meaning) ParamDecl::String(#name, def, meaning)
+#define GR_PARAM(kind, name, def, home, modifiers, meaning) GR_DECL_##kind(name, def, meaning) modifiers,
+#include "nodes/grains/kernels/param_table.h"
+#undef GR_PARAM
   };
   t.make = [] { return std::make_unique<GrainsNode>(); };
   register_node_type(std::move(t));

@@ -50,20 +50,23 @@ namespace {
 gr_params make_params(const GrainsSettings& s) {
   gr_params k;
   std::memset(&k, 0, sizeof k);
+  // the table's KERNEL rows, as evaluated
+#define GR_COPY_KERNEL(name) k.name = s.name;
+#define GR_COPY_HOST(name)
+#define GR_PARAM(kind, name, def, home, modifiers, meaning) GR_COPY_##home(name)
+#include "nodes/grains/kernels/param_table.h"
+#undef GR_PARAM
+#undef GR_COPY_HOST
+#undef GR_COPY_KERNEL
   k.dt = s.dt;
   k.stiffness_denominator =
       static_cast<float>(std::max(1, s.substeps) * std::max(1, s.constraint_iterations));
-  k.repulsion_weight = s.repulsion_weight;
-  k.repulsion_stiffness = s.repulsion_stiffness;
-  k.friction_with_particles = s.friction_with_particles;
-  k.friction_with_colliders = s.friction_with_colliders;
-  k.static_threshold = s.static_threshold;
-  k.scale_kinetic = s.scale_kinetic;
-  k.mass_shock = static_cast<int>(s.mass_shock);
+  const MassShock shock = s.mass_shock();
+  k.mass_shock = static_cast<int>(shock);
   // local: "because of the approximation of the exponential used, the effective shock scaling
   // power is clamped to approximately seven" (help page)
-  k.shock_power = s.mass_shock == MassShock::Local ? std::min(s.shock_scaling_power, 7.0f)
-                                                   : s.shock_scaling_power;
+  k.shock_power = shock == MassShock::Local ? std::min(s.shock_scaling_power, 7.0f)
+                                            : s.shock_scaling_power;
   k.shock_inv_separation = s.particle_separation > 0 ? 1.0f / s.particle_separation : 0.0f;
   Vec3 axis = normalized(s.shock_axis);
   k.shock_axis_x = axis.x;
@@ -72,20 +75,6 @@ gr_params make_params(const GrainsSettings& s) {
   k.shock_origin_x = s.shock_origin.x;
   k.shock_origin_y = s.shock_origin.y;
   k.shock_origin_z = s.shock_origin.z;
-  k.clumping_weight = s.clumping_weight;
-  k.clumping_stiffness = s.clumping_stiffness;
-  k.query_scale = s.neighbor_query_scale;
-  k.constraint_weight = s.constraint_weight;
-  k.constraint_stiffness = s.constraint_stiffness;
-  k.collide_constrained = s.collide_mutually_constrained ? 1 : 0;
-  k.over_relaxation = s.over_relaxation;
-  k.disable_averaging = s.disable_constraint_averaging ? 1 : 0;
-  k.velocity_blend = s.velocity_blend;
-  k.max_acceleration = s.max_acceleration;
-  k.max_speed = s.max_speed;
-  k.drift_threshold = s.drift_threshold;
-  k.target_weight = s.target_weight;
-  k.target_stiffness = s.target_stiffness;
   return k;
 }
 
@@ -515,7 +504,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // 1/shockmass)
   // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
   const bool constraints_on =
-      s.constraint_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
+      s.explicit_constraints_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
   n_ = n;
   inv_mass_.resize(n);
   // the caller's arrays where they serve as they are; copies free their memory when not needed
@@ -548,7 +537,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     const float m = mass_[i];
-    if (s.mass_shock == MassShock::Global) {
+    if (s.mass_shock() == MassShock::Global) {
       // written "prior to iterating" (help page), from the start-of-substep position
       float sm = gr_shockmass(&prm, m, gr_load3(P0_, static_cast<int>(i)));
       if (d.shockmass) d.shockmass[i] = sm;
@@ -560,7 +549,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // pairs are needed for contacts or clumping; weight 0 for both skips neighbour search and the
   // pair loop entirely
-  const bool pairs_on = s.repulsion_weight > 0 || s.clumping_weight > 0;
+  const bool pairs_on = s.internal_collisions_weight > 0 || s.clumping_weight > 0;
   const bool colliders_on = collider_count > 0;
 
   gr_grains g;
@@ -602,7 +591,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // rest shapes, rebuilt from the start-of-substep positions whenever the grains or the
   // primitives change (first seen, births, deaths, broken constraints); otherwise the stored rest
   // offsets are kept
-  const bool shapes_on = s.rigid_shape_matching && d.prim_points && d.prim_count > 0;
+  const bool shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
   if (shapes_on) {
     std::vector<int32_t> key;
     key.reserve(1 + n + 2 * d.prim_count);
@@ -678,7 +667,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // friction (gr_friction_pass): once after the loop, or after every iteration with accurate
   // friction, bounded by the normal corrections each contact applied, summed over the iterations
   const bool pair_friction_pass =
-      pairs_on && s.repulsion_weight > 0 && s.friction_with_particles > 0;
+      pairs_on && s.internal_collisions_weight > 0 && s.friction_with_particles > 0;
   const bool collider_friction_pass = colliders_on && s.friction_with_colliders > 0;
   gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr, nullptr};
   if (s.accurate_friction && (pair_friction_pass || collider_friction_pass)) {
@@ -752,7 +741,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     }
     // mutually constrained grains that do not collide: drop their pairs once here rather than
     // look each one up in every iteration; rows keep their order and their max_neighbors cut
-    if (constraints_on && !s.collide_mutually_constrained) {
+    if (constraints_on && !s.collide_mutually_constrained_particles) {
       drop_constrained_pairs(threads);
       g.nbr_unconstrained = 1;
     }
@@ -853,11 +842,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
   // removed from the start and predicted positions alike, without velocity
-  if (s.pre_stabilization && ((pairs_on && s.repulsion_weight > 0) || colliders_on)) {
+  if (s.pre_stabilization && ((pairs_on && s.internal_collisions_weight > 0) || colliders_on)) {
     gr_params ps = prm;
     ps.clumping_weight = 0.0f;
     gr_grains gs = g;
-    if (!(s.repulsion_weight > 0)) gs.nbr_offsets = nullptr;
+    if (!(s.internal_collisions_weight > 0)) gs.nbr_offsets = nullptr;
     P_stable_.resize(3 * n + 1);
     p_stable_next_.resize(3 * n + 1);
     std::copy(P0_, P0_ + 3 * n, P_stable_.begin());

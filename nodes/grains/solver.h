@@ -8,6 +8,7 @@
 // common subset of C++ and OpenCL C, so an OpenCL path compiles the same source.
 #pragma once
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "engine/collider.h"
@@ -16,82 +17,49 @@
 namespace grains {
 
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
+// mass_shock_method's choices, in its menu's order (kernels/param_table.h)
+enum MassShockMethod { kShockGlobal = 0, kShockLocal = 1 };
 
-// Parameters of one substep, already evaluated (expressions resolved) by the node.
+// removes the parentheses of a table's vector default: GR_UNPAREN (0, 1, 0) is 0, 1, 0
+#define GR_UNPAREN(...) __VA_ARGS__
+
+// Parameters of one substep, already evaluated (expressions resolved) by the node: one member per
+// row of kernels/param_table.h, named as the graph names it, with the row's default, and what the
+// node adds from the moment being computed.
 struct GrainsSettings {
-  float dt = 1.0f / 48;       // substep length (s)
-  int substeps = 1;           // the solver's substeps per frame (stiffness scaling)
-  int constraint_iterations = 10;
-  float particle_separation = 0.1f;  // mean diameter hint (m): missing pscale and mass-shock scale
-  bool assume_uniform_radius = true;
-  // friction
-  // (Macklin 2014 eqs. 23-25; kernels/iterate.h gr_friction_pass). Coulomb's law bounded by the
-  // normal correction each contact applied in the substep: static_threshold x friction is the
-  // static coefficient (a grain sticks on an incline while tan(angle) < it) and
-  // scale_kinetic x friction the kinetic one.
-  float friction_with_colliders = 1.0f;  // x `friction` point attribute
-  float friction_with_particles = 1.0f;  // x `friction` point attribute
-  bool accurate_friction = true;         // friction after every iteration instead of one pass after
-  float static_threshold = 1.0f;         // |dx_t| < static_threshold * overlap: stick
-  float scale_kinetic = 0.5f;            // else remove min(1, scale_kinetic * overlap / |dx_t|)
-  // internal collisions
-  float repulsion_weight = 1.0f;      // x repulsionweight
-  float repulsion_stiffness = 1000.0f;  // x repulsionstiffness
-  // mass-shock scaling
-  MassShock mass_shock = MassShock::Off;
-  float shock_scaling_power = 1.0f;
-  Vec3 shock_axis{0, 1, 0};
-  Vec3 shock_origin{0, 0, 0};
-  // clumping
-  float clumping_weight = 0.0f;     // x attractionweight
-  float clumping_stiffness = 100.0f;  // x attractionstiffness
-  // explicit constraints (kernels/distance.h): 2-point primitives keep their restlength
-  float constraint_weight = 1.0f;        // x constraintweight; 0 skips constraints entirely
-  float constraint_stiffness = 1000.0f;  // x constraintstiffness; full at substeps x iterations
-  bool collide_mutually_constrained = false;  // constrained pairs also collide
-  // strain e = (|x_i - x_j| - L) / L at the end of the substep. Instantaneous: strain = e.
-  // Accumulating: strain <- strain * exp(-strain_decay * dt) + (e_end - e_start), the change of
-  // stretch over the substep added to a memory that fades at strain_decay (1/s): with decay 0 it
-  // follows e like the instantaneous mode, with decay > 0 only recent stretching counts, so slow
-  // deformation is forgiven (plastic-like) while a fast pull still breaks.
-  bool instantaneous_strain = true;
-  float strain_decay = 1.0f;        // 1/s
-  bool break_constraints = false;   // remove a constraint once |strain| > strength * threshold
-  float break_threshold = 0.05f;    // instantaneous: 0.05 = 5% stretch breaks
-  // remove chain-only constraints: those whose two endpoints both have constraint degree <= 2,
-  // repeated until none is left (a solid's surface grains have degree >= 3)
-  bool remove_strands = false;
-  // solver controls
-  int max_neighbors = 32;
-  float neighbor_query_scale = 1.5f;
-  float max_speed = 1e6f;         // m/s, caps the reported v only
-  float max_acceleration = 1e6f;  // m/s^2, caps the constraint-induced change of v per substep
-  float drift_threshold = 0.0f;   // m/s: slower particles stay where they were
-  float velocity_blend = 0.0f;    // 0: v from the positions; 1: keep the predicted v
-  float over_relaxation = 1.0f;
-  // Chebyshev acceleration of the iterations (kernels/iterate.h): the estimated spectral radius
-  // rho of the Jacobi iteration, 0 = off. Not on the help page.
-  float chebyshev_rho = 0.0f;
-  // pre-stabilization (kernels/iterate.h gr_stabilize): contacts iterated on the start positions
-  // until they hold, moving start and prediction alike, so old overlap adds no velocity. Not on
-  // the help page.
-  bool pre_stabilization = true;
+#define GR_SETTING_FLOAT(name, def) float name = def;
+#define GR_SETTING_INT(name, def) int name = def;
+#define GR_SETTING_TOGGLE(name, def) bool name = def;
+#define GR_SETTING_VECTOR(name, def) Vec3 name{GR_UNPAREN def};
+#define GR_SETTING_MENU(name, def) int name = def;
+#define GR_SETTING_STRING(name, def) std::string name = def;
+#define GR_PARAM(kind, name, def, home, modifiers, meaning) GR_SETTING_##kind(name, def)
+#include "nodes/grains/kernels/param_table.h"
+#undef GR_PARAM
+#undef GR_SETTING_FLOAT
+#undef GR_SETTING_INT
+#undef GR_SETTING_TOGGLE
+#undef GR_SETTING_VECTOR
+#undef GR_SETTING_MENU
+#undef GR_SETTING_STRING
+
+  float dt = 1.0f / 48;  // substep length (s)
+  int substeps = 1;      // the solver's substeps per frame (stiffness scaling)
   // the first substep after error control refined the step: its constraints remove the overlap
   // the coarser step left, but the grains keep the velocity they started with, since that
-  // overlap, resolved in one finer step, would become a speed overlap / dt (set by the node from
-  // TimeInfo::stabilize, not a parameter)
+  // overlap, resolved in one finer step, would become a speed overlap / dt (from
+  // TimeInfo::stabilize)
   bool keep_velocity = false;
-  bool update_collisions_during_iterations = false;
-  bool update_neighbors_during_iterations = false;
-  bool final_collision_test = true;
-  bool disable_constraint_averaging = false;
-  // pins (help page "Targets (Pins)"): weight x targetweight, stiffness x targetstiffness
-  float target_weight = 1.0f;
-  float target_stiffness = 1000.0f;
-  // rigid shape matching: each connected component of GrainsData::edges keeps a best-fit rigid
-  // placement of its rest shape
-  bool rigid_shape_matching = false;
   int threads = 0;  // 0: OpenMP default
+
+  MassShock mass_shock() const {
+    if (!enable_mass_shock_scaling) return MassShock::Off;
+    return mass_shock_method == kShockGlobal ? MassShock::Global : MassShock::Local;
+  }
+  void set_mass_shock(MassShock m) {
+    enable_mass_shock_scaling = m != MassShock::Off;
+    mass_shock_method = m == MassShock::Local ? kShockLocal : kShockGlobal;
+  }
 };
 
 // Compact per-grain arrays (n grains). Optional attribute arrays are nullptr when the point

@@ -3,8 +3,8 @@
  *
  * Contact, eq. 22: C = |x_ij| - (r_i + r_j) >= 0. With overlap d = (r_i + r_j) - |x_ij| > 0 and
  * n = x_ij / |x_ij| (from j to i):
- *   dp_i = w_i / (w_i + w_j) * d * n * repulsion_weight * repulsionweight_i
- *          * min(1, repulsion_stiffness * repulsionstiffness_i / (substeps * iterations)).
+ *   dp_i = w_i / (w_i + w_j) * d * n * internal_collisions_weight * repulsionweight_i
+ *          * min(1, internal_collisions_stiffness * repulsionstiffness_i / (substeps * iterations)).
  *
  * Friction, eqs. 23-25: the pair's relative displacement over the substep
  *   dx = (p_i - P_i) - (p_j - P_j), its tangential part, the slip s = dx - (dx . n) n, i's share
@@ -31,9 +31,9 @@ GR_INLINE gr_float3 gr_friction(gr_float3 dx, gr_float3 n, float bound, float st
 
 /* i's repulsion scale: weight x stiffness fraction, both with their point attributes */
 GR_INLINE float gr_repulsion_scale(const gr_grains* g, const gr_params* prm, int i) {
-  float k = prm->repulsion_stiffness * gr_attr(g->repulsionstiffness, i);
+  float k = prm->internal_collisions_stiffness * gr_attr(g->repulsionstiffness, i);
   float fraction = gr_max(0.0f, gr_min(1.0f, k / prm->stiffness_denominator));
-  return prm->repulsion_weight * gr_attr(g->repulsionweight, i) * fraction;
+  return prm->internal_collisions_weight * gr_attr(g->repulsionweight, i) * fraction;
 }
 
 /* the unit direction from j to i; coincident grains separate along +-y by index so the pair
@@ -164,11 +164,11 @@ GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GL
   gr_uint k;
   gr_float3 pi = gr_load3(p, i);
   float ri = g->radius[i];
-  float repulse = prm->repulsion_weight > 0.0f ? gr_repulsion_scale(g, prm, i) : 0.0f;
+  float repulse = prm->internal_collisions_weight > 0.0f ? gr_repulsion_scale(g, prm, i) : 0.0f;
   float clump = prm->clumping_weight > 0.0f ? gr_clump_scale(g, prm, i) : 0.0f;
   /* squared reach of a candidate that can act, in units of (r_i + r_j)^2 */
-  float reach2 = clump > 0.0f ? prm->query_scale * prm->query_scale : 1.0f;
-  int skip_constrained = g->con_offsets && !prm->collide_constrained && !g->nbr_unconstrained;
+  float reach2 = clump > 0.0f ? prm->neighbor_query_scale * prm->neighbor_query_scale : 1.0f;
+  int skip_constrained = g->con_offsets && !prm->collide_mutually_constrained_particles && !g->nbr_unconstrained;
   if (!(clump > 0.0f) && !skip_constrained && prm->mass_shock != 2) {
     if (!(repulse > 0.0f)) {
       if (overlap_out)
@@ -200,7 +200,7 @@ GR_HOT int gr_gather_pairs(const gr_grains* g, const gr_params* prm, const GR_GL
       float share = gr_pair_share(g, prm, i, j);
       corr = gr_scale(n, share * d * repulse);
       if (overlap_out) overlap_out[k - row_begin] = d;
-    } else if (clump > 0.0f && dist < prm->query_scale * rsum) {
+    } else if (clump > 0.0f && dist < prm->neighbor_query_scale * rsum) {
       gr_float3 n = gr_scale(xij, 1.0f / dist);
       corr = gr_clump_pair(n, dist - rsum, gr_plain_share(g, i, j), clump);
     } else {

@@ -4,8 +4,8 @@
  * A constraint is a 2-point polyline primitive (i, j) with rest length L:
  *   C = |x_ij| - L,  n = x_ij / |x_ij|  (from j to i),
  *   dp_i = -w_i / (w_i + w_j) * C * n
- *          * constraint_weight * constraintweight_i
- *          * min(1, constraint_stiffness * constraintstiffness_i / (substeps * iterations)).
+ *          * explicit_constraints_weight * constraintweight_i
+ *          * min(1, explicit_constraints_stiffness * constraintstiffness_i / (substeps * iterations)).
  * The weight and stiffness attributes are read per particle, not per constraint (help page): a
  * grain with constraintweight 0 ignores its constraints while its partners still pull on it.
  * Strain (the `strain` primitive attribute, DESIGN §4): e = (|x_ij| - L) / L (0 when L = 0). */
@@ -15,9 +15,9 @@
 
 /* i's constraint scale: weight x stiffness fraction, both with their point attributes */
 GR_INLINE float gr_constraint_scale(const gr_grains* g, const gr_params* prm, int i) {
-  float k = prm->constraint_stiffness * gr_attr(g->constraintstiffness, i);
+  float k = prm->explicit_constraints_stiffness * gr_attr(g->constraintstiffness, i);
   float fraction = gr_max(0.0f, gr_min(1.0f, k / prm->stiffness_denominator));
-  return prm->constraint_weight * gr_attr(g->constraintweight, i) * fraction;
+  return prm->explicit_constraints_weight * gr_attr(g->constraintweight, i) * fraction;
 }
 
 /* the strain of a constraint between points a and b with rest length L */

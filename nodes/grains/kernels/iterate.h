@@ -93,9 +93,9 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   if (g->targetP) count += gr_gather_pin(g, prm, p, i, &sum);
   if (acc->collider_dx && ccount)
     gr_add_collider_dx(acc->collider_dx, i, csum,
-                       gr_average_factor(count, prm->over_relaxation, prm->disable_averaging), pen);
+                       gr_average_factor(count, prm->over_relaxation, prm->disable_constraint_averaging), pen);
   if (acc->pair || acc->collider) {
-    float share = (prm->disable_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
+    float share = (prm->disable_constraint_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
     if (acc->pair && g->nbr_offsets) {
       gr_uint k;
       /* bounds read once: the stores below could otherwise alias them, and the loop would not
@@ -115,7 +115,7 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
       for (k = b; k < e; ++k) acc->collider[k] += pen[k - b] * share;
     }
   }
-  return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_averaging);
+  return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_constraint_averaging);
 }
 
 /* Pre-stabilization (Macklin et al. 2014 §4.4): one Jacobi iteration of the contacts alone
@@ -131,7 +131,7 @@ GR_INLINE gr_float3 gr_stabilize(const gr_grains* g, const gr_params* prm,
   float pen[GR_MAX_PLANES];
   if (g->nbr_offsets) count += gr_gather_pairs(g, prm, x, i, 0, &sum);
   if (g->plane_offsets) count += gr_gather_collider(g, prm, x, i, pen, &sum);
-  return gr_average(gr_load3(x, i), sum, count, 1.0f, prm->disable_averaging);
+  return gr_average(gr_load3(x, i), sum, count, 1.0f, prm->disable_constraint_averaging);
 }
 
 /* Friction of grain i (DESIGN §4 "friction"; Macklin et al. 2014 eqs. 23-25, bounded as XPBD
@@ -168,7 +168,7 @@ GR_INLINE gr_float3 gr_friction_pass(const gr_grains* g, const gr_params* prm,
   const float largest = gr_max(f.largest, c.largest);
   if (!(weight > 0.0f) || !(largest > 0.0f)) return pi;
   const float bound = (f.bound + c.bound) / largest;
-  gr_float3 t = prm->disable_averaging ? gr_add(f.plain, c.plain)
+  gr_float3 t = prm->disable_constraint_averaging ? gr_add(f.plain, c.plain)
                                        : gr_scale(gr_add(f.target, c.target), 1.0f / weight);
   const float tl = gr_length(t);
   if (!(tl > 0.0f) || !(bound > 0.0f)) return pi;

@@ -9,41 +9,26 @@
 #define GR_MAX_PLANES 4
 
 typedef struct {
+  /* the KERNEL rows of param_table.h, as the graph names them */
+#define GR_KERNEL_TYPE_FLOAT float
+#define GR_KERNEL_TYPE_INT int
+#define GR_KERNEL_TYPE_TOGGLE int
+#define GR_KERNEL_FIELD_KERNEL(kind, name) GR_KERNEL_TYPE_##kind name;
+#define GR_KERNEL_FIELD_HOST(kind, name)
+#define GR_PARAM(kind, name, def, home, modifiers, meaning) GR_KERNEL_FIELD_##home(kind, name)
+#include "param_table.h"
+#undef GR_PARAM
+#undef GR_KERNEL_FIELD_HOST
+#undef GR_KERNEL_FIELD_KERNEL
+  /* derived each substep (solver.cpp make_params) */
   float dt;                    /* substep length (s) */
   float stiffness_denominator; /* substeps * constraint_iterations: k -> min(1, k / this) */
-  /* internal collisions; weight 0 = off */
-  float repulsion_weight;
-  float repulsion_stiffness;
-  /* friction (Macklin 2014 eqs. 23-25) */
-  float friction_with_particles;
-  float friction_with_colliders;
-  float static_threshold;
-  float scale_kinetic;
   /* mass-shock scaling: 0 off, 1 global (inv_mass holds 1/shockmass), 2 local */
   int mass_shock;
   float shock_power;          /* local: already clamped to 7 */
   float shock_inv_separation; /* 1 / particle_separation (1/m) */
   float shock_axis_x, shock_axis_y, shock_axis_z; /* unit */
   float shock_origin_x, shock_origin_y, shock_origin_z;
-  /* clumping; weight 0 = off */
-  float clumping_weight;
-  float clumping_stiffness;
-  float query_scale; /* neighbor_query_scale: clumping range in units of r_i + r_j */
-  /* explicit constraints; weight 0 = off (no adjacency: con_offsets null) */
-  float constraint_weight;
-  float constraint_stiffness;
-  int collide_constrained; /* collide_mutually_constrained_particles */
-  /* averaging */
-  float over_relaxation;
-  int disable_averaging;
-  /* velocity update */
-  float velocity_blend;
-  float max_acceleration; /* m/s^2 */
-  float max_speed;        /* m/s */
-  float drift_threshold;  /* m/s */
-  /* pins; weight 0 or no targetstiffness attribute = off (targetP null) */
-  float target_weight;
-  float target_stiffness;
 } gr_params;
 
 typedef struct {

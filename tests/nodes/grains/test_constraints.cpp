@@ -136,7 +136,7 @@ TEST_CASE("a connected sheet draped on a sphere keeps its edge lengths when stif
   auto drape = [](float stiffness, float* impact) {
     Scene sc;
     sc.s = settings(24, 8, 25);
-    sc.s.constraint_stiffness = stiffness;
+    sc.s.explicit_constraints_stiffness = stiffness;
     ColliderState ball;
     ball.name = "ball";
     ball.shape.kind = ShapeKind::Sphere;
@@ -322,7 +322,7 @@ TEST_CASE("constrained pairs collide only when asked", "[grains][constraints]") 
     Scene sc;
     sc.s = settings(24, 4, 10);
     sc.gravity = {0, 0, 0};
-    sc.s.collide_mutually_constrained = collide;
+    sc.s.collide_mutually_constrained_particles = collide;
     sc.add({0, 0, 0}, 0.05f);
     sc.add({0.06f, 0, 0}, 0.05f);
     sc.connect(0, 1);

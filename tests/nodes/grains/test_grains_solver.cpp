@@ -204,7 +204,7 @@ TEST_CASE("particle friction grows with overlap: soft contacts rub longer", "[gr
   auto slip_speed = [](float stiffness) {
     Scene sc;
     sc.s = settings(24, 2, 20);
-    sc.s.repulsion_stiffness = stiffness;
+    sc.s.internal_collisions_stiffness = stiffness;
     sc.s.pre_stabilization = false;  // the overlap they start with is the point
     sc.gravity = {0, 0, 0};
     sc.add({0, 0, 0}, 0.05f);
@@ -286,7 +286,7 @@ TEST_CASE("results are bit-identical for 1 and 2 threads", "[grains][determinism
     sc.s.threads = threads;
     sc.s.clumping_weight = 0.2f;
     sc.s.accurate_friction = true;
-    sc.s.mass_shock = MassShock::Local;
+    sc.s.set_mass_shock(MassShock::Local);
     sc.add_collider(ground());
     unsigned seed = 12345;
     auto rnd = [&] {
@@ -314,7 +314,7 @@ TEST_CASE("mass-shock scaling lowers a tall stack's residual penetration", "[gra
   // stack keeps less overlap. 100 grains, 60 iterations (under the 2x stacking-height rule).
   auto residual = [](MassShock mode, float power) {
     GrainsSettings s = settings(24, 4, 60);
-    s.mass_shock = mode;
+    s.set_mass_shock(mode);
     s.shock_scaling_power = power;
     s.particle_separation = 0.1f;
     Scene sc = column(100, 0.05f, s);
@@ -334,7 +334,7 @@ TEST_CASE("mass-shock scaling lowers a tall stack's residual penetration", "[gra
 TEST_CASE("global mass-shock writes shockmass", "[grains][massshock]") {
   // shockmass = mass * exp(-0.15 * power * h / separation), h = (P - origin) . axis
   GrainsSettings s = settings(24, 1, 5);
-  s.mass_shock = MassShock::Global;
+  s.set_mass_shock(MassShock::Global);
   s.shock_scaling_power = 2;
   s.particle_separation = 0.1f;
   s.shock_axis = {0, 2, 0};  // normalised by the solver
@@ -391,7 +391,7 @@ TEST_CASE("stiffness: the per-frame enforcement depends on substeps x iterations
   // stiffness): for k = 2, 0.9^20 = 0.122 vs 0.8^10 = 0.107.
   auto pair = [](int substeps, int iterations, float k) {
     GrainsSettings s = settings(24, substeps, iterations);
-    s.repulsion_stiffness = k;
+    s.internal_collisions_stiffness = k;
     s.velocity_blend = 1;
     Scene sc = overlapping_pair(0.02f, s);
     sc.run(1.0f / 24);
@@ -411,7 +411,7 @@ TEST_CASE("stiffness: the per-frame enforcement depends on substeps x iterations
   // overlap before the iterations see it, as for the pair above.
   auto cluster = [](float k) {
     GrainsSettings s = settings(24, 2, 10);
-    s.repulsion_stiffness = k;
+    s.internal_collisions_stiffness = k;
     s.pre_stabilization = false;
     Scene sc;
     sc.s = s;
@@ -430,11 +430,11 @@ TEST_CASE("stiffness: the per-frame enforcement depends on substeps x iterations
 TEST_CASE("repulsion weight 0 turns particle collisions off", "[grains]") {
   // Help page: "A value of zero will disable particle collision."
   GrainsSettings s = settings(24, 1, 10);
-  s.repulsion_weight = 0;
+  s.internal_collisions_weight = 0;
   Scene sc = overlapping_pair(0.05f, s);
   sc.substep();
   CHECK(sc.pos(1).x == Approx(0.05f));
-  s.repulsion_weight = 1;
+  s.internal_collisions_weight = 1;
   Scene on = overlapping_pair(0.05f, s);
   on.substep();
   CHECK(on.pos(1).x - on.pos(0).x == Approx(0.1f).epsilon(1e-4));
@@ -646,7 +646,7 @@ TEST_CASE("constraint averaging moves an asymmetric clump's centre and disabling
     GrainsSettings s = settings(24, 2, 10);
     s.disable_constraint_averaging = disable;
     s.pre_stabilization = false;  // the iterations, not the pre-stabilization, meet the overlap
-    if (disable) s.repulsion_weight = 0.5f;
+    if (disable) s.internal_collisions_weight = 0.5f;
     Scene sc;
     sc.s = s;
     sc.gravity = {0, 0, 0};
@@ -820,7 +820,7 @@ TEST_CASE("a 1000:1 heavy grain rests on a bed of small grains", "[grains][masss
   auto bed = [](MassShock mode) {
     GrainsSettings s = settings(24, 2, 40);
     s.assume_uniform_radius = false;
-    s.mass_shock = mode;
+    s.set_mass_shock(mode);
     s.shock_scaling_power = 5;
     s.particle_separation = 0.1f;
     s.accurate_friction = true;

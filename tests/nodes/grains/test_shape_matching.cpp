@@ -49,7 +49,7 @@ double deformation(const Scene& sc, const std::vector<Vec3>& rest) {
 Scene cube(bool rigid, std::vector<Vec3>& rest, float height) {
   Scene sc;
   sc.s = settings(24, 4, 20);
-  sc.s.rigid_shape_matching = rigid;
+  sc.s.enable_rigid_shape_matching = rigid;
   sc.add_collider(ground());
   const float r = 0.05f;
   const int m = 10;
@@ -64,7 +64,7 @@ Scene cube(bool rigid, std::vector<Vec3>& rest, float height) {
       }
   // primitives to the +x, +y, +z neighbours: shape matching's connectivity only (explicit
   // constraint weight 0, so they hold nothing by themselves)
-  sc.s.constraint_weight = 0;
+  sc.s.explicit_constraints_weight = 0;
   for (int a = 0; a < m; ++a)
     for (int b = 0; b < m; ++b)
       for (int c = 0; c < m; ++c) {

@@ -2,6 +2,7 @@
 BUILD ?= build
 JOBS ?= $(shell nproc)
 GRAINS := $(BUILD)/grains
+GRAINS_LAB := $(BUILD)/grains-lab
 
 .PHONY: deps configure build demo test docs bench bench-features clean format \
         fuzz-build fuzz-short fuzz test-sanitize
@@ -62,13 +63,13 @@ test-sanitize: deps
 	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ctest --output-on-failure -j $(JOBS)
 
 bench: build
-	$(GRAINS) bench --out out/bench
+	$(GRAINS_LAB) bench --out out/bench
 
 bench-features: build
-	$(GRAINS) bench --features --out out/bench
+	$(GRAINS_LAB) features --out out/bench
 
 clean:
 	rm -rf $(BUILD) $(FUZZ_BUILD) $(ASAN_BUILD) out
 
 format:
-	find engine nodes app tests bench viewer-offline -name '*.cpp' -o -name '*.h' | xargs clang-format -i
+	find engine nodes cli app lab tests bench viewer-offline -name '*.cpp' -o -name '*.h' | xargs clang-format -i

@@ -1,11 +1,6 @@
 // The grains program (DESIGN §5). Exit codes: 0 success, 2 bad input, 1 failure while running.
 #include "app/cli.h"
 
-#include "app/bench.h"
-#include "app/dem_measures.h"
-#include "app/options.h"
-#include "app/validation.h"
-
 #include <omp.h>
 #include <unistd.h>
 
@@ -16,9 +11,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
-#include <limits>
 
+#include "cli/options.h"
 #include "engine/cook.h"
+#include "engine/dem_measures.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/schema.h"
@@ -32,26 +28,6 @@ namespace {
 
 constexpr int kBadInput = 2;
 constexpr int kRunFailure = 1;
-
-// What is wrong with a floating-point option's text, or "": CLI11 reads "nan" and "inf" as
-// numbers, and the engine computes in float.
-std::string float_option_problem(const std::string& text) {
-  double v = 0;
-  if (std::string bad = finite_number_problem(text, v); !bad.empty()) return bad;
-  if (std::fabs(v) > std::numeric_limits<float>::max())
-    return "'" + text + "' is beyond the float range";
-  return "";
-}
-
-// Every floating-point option of the parsed (sub)commands passes float_option_problem.
-void check_float_options(const CLI::App& app) {
-  for (const CLI::Option* o : app.get_options())
-    if (o->count() > 0 && o->get_type_name().starts_with("FLOAT"))
-      for (const std::string& text : o->results())
-        if (std::string bad = float_option_problem(text); !bad.empty())
-          throw CLI::ValidationError(o->get_name(), bad);
-  for (const CLI::App* sub : app.get_subcommands()) check_float_options(*sub);
-}
 
 std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
   std::vector<Override> out;
@@ -77,8 +53,9 @@ bool run_owns(const std::filesystem::path& p) {
 }
 
 LoadError used_folder(const std::string& dir, const std::string& what) {
-  return LoadError(dir, "", "the output folder is not empty (" + what +
-                                "): pass --overwrite to replace its frames, or name another");
+  return LoadError(dir, "",
+                   "the output folder is not empty (" + what +
+                       "): pass --overwrite to replace its frames, or name another");
 }
 
 // A run's folders must be empty: frames left by an earlier, longer run would be read as this
@@ -104,8 +81,9 @@ void prepare_output(const std::vector<std::string>& dirs, bool overwrite,
     for (const fs::path& f : owned)
       for (const std::string& in : inputs)
         if (fs::equivalent(f, in, ec))
-          throw LoadError(in, "", "the graph reads this file, and --overwrite would remove it from "
-                                  "the output folder first: copy it elsewhere");
+          throw LoadError(in, "",
+                          "the graph reads this file, and --overwrite would remove it from "
+                          "the output folder first: copy it elsewhere");
     for (const fs::path& f : owned)
       if (!fs::remove(f, ec) && ec)
         throw std::runtime_error(f.string() + ": cannot remove (" + ec.message() + ")");
@@ -263,11 +241,12 @@ int cmd_cook(const std::string& type, const std::string& in, const std::vector<s
   o.out_dir = out;
   o.source = "cook " + type;
   cook_node(type, params, pts, o);
-  std::fprintf(stderr, "cooked %s on %zu points; wrote %s\n", type.c_str(), pts.size(), out.c_str());
+  std::fprintf(stderr, "cooked %s on %zu points; wrote %s\n", type.c_str(), pts.size(),
+               out.c_str());
   return 0;
 }
 
-// `grains heap`: the angle of a heap (app/heap.h) in one frame.
+// `grains heap`: the angle of a heap (engine/dem_measures.h) in one frame.
 int cmd_heap(const std::string& path, double d, double cx, double cz) {
   ParticleStore pts = read_ply(path);
   if (!(d > 0)) {
@@ -278,10 +257,11 @@ int cmd_heap(const std::string& path, double d, double cx, double cz) {
     d = 2.0 * r[r.size() / 2];
   }
   HeapAngle h = heap_angle(pts, d, cx, cz);
-  std::printf("%s: heap angle %.1f deg (sd %.1f over %d sectors), cone %.1f deg, peak %.3f m, "
-              "foot radius %.3f m, %zu grains (d %.4g m)\n",
-              path.c_str(), h.angle_deg, h.spread_deg, h.sectors, h.cone_deg, h.peak,
-              h.foot_radius, h.grains, d);
+  std::printf(
+      "%s: heap angle %.1f deg (sd %.1f over %d sectors), cone %.1f deg, peak %.3f m, "
+      "foot radius %.3f m, %zu grains (d %.4g m)\n",
+      path.c_str(), h.angle_deg, h.spread_deg, h.sectors, h.cone_deg, h.peak, h.foot_radius,
+      h.grains, d);
   return 0;
 }
 
@@ -289,7 +269,8 @@ int cmd_heap(const std::string& path, double d, double cx, double cz) {
 
 int cli_main(int argc, char** argv) {
   register_builtin_nodes();
-  CLI::App app{"grains: runs JSON node graphs of particles; the grains node is a PBD granular solver"};
+  CLI::App app{
+      "grains: runs JSON node graphs of particles; the grains node is a PBD granular solver"};
   app.require_subcommand(1);
 
   std::string graph_path, out, in, type, cook_out;
@@ -302,7 +283,8 @@ int cli_main(int argc, char** argv) {
   auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
   run->add_option("graph", graph_path, "graph file (JSON)")->required();
   run->add_option("--out", out, "output folder (default: the graph's output.dir)");
-  run->add_option("--frames", frames, "number of frames (default: the graph's)")->check(positive_number());
+  run->add_option("--frames", frames, "number of frames (default: the graph's)")
+      ->check(positive_number());
   run->add_option("--threads", threads, "worker threads (default: all cores)")
       ->check(CLI::Range(1, kMaxThreads));
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
@@ -336,17 +318,13 @@ int cli_main(int argc, char** argv) {
   cook->add_flag("--overwrite", overwrite,
                  "replace the frames and stats.csv an earlier cook left in the output folder");
 
-  BenchOptions bench_opts;
-  auto* bench = add_bench_command(app, bench_opts, argc, argv);
-
-  ValidationOptions laws_opts;
-  auto* laws = add_validation_command(app, laws_opts, argc, argv);
-
   std::string heap_frame;
   double heap_d = 0, heap_cx = 0, heap_cz = 0;
-  auto* heap = app.add_subcommand("heap", "measure the angle of a heap in a frame, as the DEM reference does");
+  auto* heap = app.add_subcommand(
+      "heap", "measure the angle of a heap in a frame, as the DEM reference does");
   heap->add_option("frame", heap_frame, "a frame (PLY) written by run")->required();
-  heap->add_option("--d", heap_d, "grain diameter, m (default: twice the median pscale)")->check(positive_number());
+  heap->add_option("--d", heap_d, "grain diameter, m (default: twice the median pscale)")
+      ->check(positive_number());
   heap->add_option("--cx", heap_cx, "x of the heap's axis (m)");
   heap->add_option("--cz", heap_cz, "z of the heap's axis (m)");
 
@@ -384,8 +362,6 @@ int cli_main(int argc, char** argv) {
       return 0;
     }
     if (heap->parsed()) return cmd_heap(heap_frame, heap_d, heap_cx, heap_cz);
-    if (bench->parsed()) return run_bench(bench_opts);
-    if (laws->parsed()) return run_validation(laws_opts);
     if (render->parsed()) return viewer::render_command(render_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,

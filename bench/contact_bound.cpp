@@ -1,5 +1,5 @@
 // grains_contact_bound: how fast the contact iterations alone can run on one pile, as a floor
-// under `grains bench`'s particle-iterations per second.
+// under `grains-lab bench`'s particle-iterations per second.
 //
 //   grains_contact_bound FRAME.ply [--iterations N] [--repeat R] [--threads T]
 //                        [--query-scale S] [--max-neighbors M]

@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev nlohmann-json3-dev libspdlog-dev libfmt-dev catch2
-  libmuparser-dev libcli11-dev libstb-dev libtbb-dev
+  libmuparser-dev libcli11-dev libstb-dev
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd
   # the graph schema's test checks the examples with an independent validator
   python3 python3-jsonschema

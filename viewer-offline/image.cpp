@@ -230,4 +230,40 @@ void draw_text(Image& img, int x, int y, const std::string& s, const Rgb& color,
   }
 }
 
+void draw_text_up(Image& img, int x, int y, const std::string& s, const Rgb& color, int scale) {
+  for (size_t k = 0; k < s.size(); ++k) {
+    const Glyph& g = glyph_for(s[k]);
+    int gu = static_cast<int>(k) * 6 * scale;  // along the text, upwards from y
+    for (int row = 0; row < 7; ++row)
+      for (int col = 0; col < 5; ++col)
+        if (g.rows[row][col] == '#') {
+          int u = gu + col * scale;
+          img.fill_rect(x + row * scale, y - u - scale + 1, x + (row + 1) * scale, y - u + 1,
+                        color);
+        }
+  }
+}
+
+// ---- plot strokes -----------------------------------------------------------------------------
+
+void draw_line(Image& img, double x0, double y0, double x1, double y1, const Rgb& color,
+               int thick) {
+  int n = static_cast<int>(std::ceil(std::max(std::fabs(x1 - x0), std::fabs(y1 - y0)))) + 1;
+  int lo = -(thick - 1) / 2, hi = thick / 2;
+  for (int k = 0; k <= n; ++k) {
+    double t = double(k) / n;
+    int x = static_cast<int>(std::lround(x0 + (x1 - x0) * t));
+    int y = static_cast<int>(std::lround(y0 + (y1 - y0) * t));
+    img.fill_rect(x + lo, y + lo, x + hi + 1, y + hi + 1, color);
+  }
+}
+
+void draw_disc(Image& img, double cx, double cy, double r, const Rgb& color, bool filled) {
+  for (int y = int(cy - r - 1); y <= int(cy + r + 1); ++y)
+    for (int x = int(cx - r - 1); x <= int(cx + r + 1); ++x) {
+      double d = std::hypot(x - cx, y - cy);
+      if (img.inside(x, y) && (filled ? d <= r : (d <= r && d >= r - 1.6))) img.set(x, y, color);
+    }
+}
+
 }  // namespace grains::viewer

@@ -1,5 +1,6 @@
-// RGB images for the offline viewer: 8-bit pixels stored row by row from the top, an optional
-// depth channel, box-filter scaling, PNG writing and a tiny built-in 5x7 bitmap font for labels.
+// RGB images for the offline viewer and the lab's plots (lab/bench.cpp): 8-bit pixels stored row
+// by row from the top, an optional depth channel, box-filter scaling, PNG writing, lines and discs,
+// and a tiny built-in 5x7 bitmap font for labels. The program's one PNG writer.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -64,5 +65,13 @@ inline int text_height(int scale) {
 }
 // Draws s with its top-left corner at (x, y).
 void draw_text(Image& img, int x, int y, const std::string& s, const Rgb& color, int scale);
+// Draws s turned a quarter left, reading bottom to top, from (x, y) up (an axis label).
+void draw_text_up(Image& img, int x, int y, const std::string& s, const Rgb& color, int scale);
+
+// Plot strokes: a line `thick` pixels wide from (x0, y0) to (x1, y1), one square of pixels per
+// step of the longer axis; a disc of radius r around (cx, cy), or only its rim (1.6 px wide).
+void draw_line(Image& img, double x0, double y0, double x1, double y1, const Rgb& color,
+               int thick = 1);
+void draw_disc(Image& img, double cx, double cy, double r, const Rgb& color, bool filled = true);
 
 }  // namespace grains::viewer

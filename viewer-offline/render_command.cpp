@@ -20,7 +20,7 @@
 #include <set>
 #include <sstream>
 
-#include "app/options.h"
+#include "cli/options.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"

@@ -88,12 +88,20 @@ struct Outcome {
   double seconds = 0;
 };
 
-// Runs the grains binary with args in folder cwd; stdin is /dev/null.
-Outcome run_binary(const std::vector<std::string>& args, const fs::path& cwd,
-                   const fs::path& log_dir) {
+// The binary a case's `program` names: grains (the default) or grains-lab; "" for another name.
+std::string binary_of(const json& c) {
+  const std::string program = c.value("program", "grains");
+  if (program == "grains") return GRAINS_BINARY;
+  if (program == "grains-lab") return GRAINS_LAB_BINARY;
+  return "";
+}
+
+// Runs `binary` with args in folder cwd; stdin is /dev/null.
+Outcome run_binary(const std::string& binary, const std::vector<std::string>& args,
+                   const fs::path& cwd, const fs::path& log_dir) {
   const std::string out_log = (log_dir / "stdout").string(),
                     err_log = (log_dir / "stderr").string();
-  std::vector<std::string> full = {GRAINS_BINARY};
+  std::vector<std::string> full = {binary};
   full.insert(full.end(), args.begin(), args.end());
   std::vector<char*> argv;
   for (std::string& a : full) argv.push_back(a.data());
@@ -322,12 +330,16 @@ bool run_case(const json& c, const fs::path& root) {
   fs::create_directories(dir);
   std::map<std::string, std::string> vars = {
       {"{dir}", dir.string()}, {"{out}", out.string()}, {"{files}", kCatalogue + "/files"}};
+  const std::string binary = binary_of(c);
+  INFO("program: " << c.value("program", "grains"));
+  CHECK_FALSE(binary.empty());
+  if (binary.empty()) return false;
   const bool has_inputs = c.contains("files") || c.contains("setup");
   vars["{file}"] = make_inputs(c, dir);
   if (has_inputs && vars["{file}"].empty()) return false;
   for (const json& b : c.value("before", json::array())) {
     const Outcome o =
-        run_binary(split_args(expand(b.get<std::string>(), vars)), dir, root / "logs");
+        run_binary(binary, split_args(expand(b.get<std::string>(), vars)), dir, root / "logs");
     INFO("before: " << b.get<std::string>() << "\n" << o.output);
     CHECK(o.exit_code == 0);
     if (o.exit_code != 0) return false;
@@ -335,10 +347,10 @@ bool run_case(const json& c, const fs::path& root) {
 
   const std::set<std::string> before = listing(root);
   const std::string args = expand(c.at("args").get<std::string>(), vars);
-  const Outcome o = run_binary(split_args(args), dir, root / "logs");
+  const Outcome o = run_binary(binary, split_args(args), dir, root / "logs");
   const int expect = c.at("exit").get<int>();
   const std::string message = expand(c.at("message").get<std::string>(), vars);
-  INFO("grains " << args << "\n" << o.output);
+  INFO(c.value("program", "grains") << " " << args << "\n" << o.output);
   CHECK_FALSE(o.timed_out);
   INFO("killed by signal " << o.signal);
   CHECK_FALSE(o.signalled);

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <filesystem>
 
-#include "app/dem_measures.h"
+#include "engine/dem_measures.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
 #include "tests/support/support.h"
@@ -51,7 +51,7 @@ TEST_CASE("every example graph validates", "[graphs]") {
 TEST_CASE("default graph: the poured grains stand as a heap at 30 degrees and stay", "[graphs]") {
   // `make demo`: 3,750 grains of 2 cm poured at the node defaults with friction 1 (static
   // Coulomb coefficient 1, kinetic 0.5) until frame 60, measured as the DEM reference measures a
-  // pile (app/dem_measures.h). The same pour had spread into a layer two grains thick, 0.046 m
+  // pile (engine/dem_measures.h). The same pour had spread into a layer two grains thick, 0.046 m
   // high over a 0.44 m radius. At frame 96, where the demo stops, the flank (the fit between
   // 20% and 80% of the peak) must stand at 30 degrees or more, and the peak must pass 0.15 m: a
   // 30 degree cone of that volume over a 0.3 m foot is 0.17 m high. Rest: once the heap has

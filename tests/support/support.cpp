@@ -1,19 +1,20 @@
 #include "tests/support/support.h"
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
-#include <unistd.h>
 
 namespace grains::test {
 
 std::string temp_dir(const std::string& tag) {
   static std::atomic<int> counter{0};
-  auto p = std::filesystem::temp_directory_path() /
-           ("grains_test_" + tag + "_" + std::to_string(getpid()) + "_" + std::to_string(counter++));
+  auto p =
+      std::filesystem::temp_directory_path() /
+      ("grains_test_" + tag + "_" + std::to_string(getpid()) + "_" + std::to_string(counter++));
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p.string();
@@ -30,10 +31,22 @@ std::string write_file(const std::string& dir, const std::string& name, const st
   return path;
 }
 
-int run_grains(const std::string& args, const std::string& log) {
-  std::string cmd = std::string(GRAINS_BINARY) + " " + args + " > " + log + " 2>&1";
+namespace {
+
+int run_binary(const std::string& binary, const std::string& args, const std::string& log) {
+  std::string cmd = binary + " " + args + " > " + log + " 2>&1";
   int rc = std::system(cmd.c_str());
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+}  // namespace
+
+int run_grains(const std::string& args, const std::string& log) {
+  return run_binary(GRAINS_BINARY, args, log);
+}
+
+int run_lab(const std::string& args, const std::string& log) {
+  return run_binary(GRAINS_LAB_BINARY, args, log);
 }
 
 std::string read_text(const std::string& path) {
@@ -43,7 +56,9 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
-std::string source_dir() { return GRAINS_SOURCE_DIR; }
+std::string source_dir() {
+  return GRAINS_SOURCE_DIR;
+}
 
 std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;

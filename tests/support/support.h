@@ -1,4 +1,5 @@
-// Shared helpers for tests: graphs from inline JSON, temporary folders, the grains binary.
+// Shared helpers for tests: graphs from inline JSON, temporary folders, the grains and
+// grains-lab binaries.
 #pragma once
 #include <filesystem>
 #include <string>
@@ -18,6 +19,8 @@ Graph graph_from(const std::string& json_text, const std::string& file = "test.j
 std::string write_file(const std::string& dir, const std::string& name, const std::string& text);
 // Runs the grains binary with arguments; returns its exit code; output goes to `log`.
 int run_grains(const std::string& args, const std::string& log);
+// The same for the grains-lab binary (bench, features, laws).
+int run_lab(const std::string& args, const std::string& log);
 std::string read_text(const std::string& path);
 // The fields of s between separators (a CSV line).
 std::vector<std::string> split(const std::string& s, char sep);

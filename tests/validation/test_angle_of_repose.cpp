@@ -1,10 +1,10 @@
 // Angle of repose of a poured pile against DEM of spheres (Zhou et al. 2001, PRE 64, 021301;
-// pbd_research.md s5), at the quick plan of `grains laws` (bench/validation/README.md),
+// pbd_research.md s5), at the quick plan of `grains-lab laws` (bench/validation/README.md),
 // 8 substeps x 40 iterations, fixed-funnel method on a rough bed of fixed grains.
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "app/validation.h"
+#include "lab/validation.h"
 #include "tests/support/support.h"
 
 using namespace grains;

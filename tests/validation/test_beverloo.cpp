@@ -1,10 +1,10 @@
 // Silo discharge against Beverloo's law (Beverloo, Leniger, van de Velde 1961; Nedderman et al.
-// 1982): W = C rho_b sqrt(g) (D - k d)^(5/2), at the quick plan of `grains laws`
+// 1982): W = C rho_b sqrt(g) (D - k d)^(5/2), at the quick plan of `grains-lab laws`
 // (bench/validation/README.md), 8 substeps x 40 iterations. It holds there: asserted.
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "app/validation.h"
+#include "lab/validation.h"
 #include "tests/support/support.h"
 
 using namespace grains;

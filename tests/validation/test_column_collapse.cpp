@@ -1,5 +1,5 @@
 // Column collapse against Lube et al. 2004 (JFM 508) and Lajeunesse et al. 2004 (Phys. Fluids
-// 16), at the quick plan of `grains laws` (bench/validation/README.md).
+// 16), at the quick plan of `grains-lab laws` (bench/validation/README.md).
 //
 // What is asserted (REQUIRE/CHECK) is what a granular column must do and what the measurement
 // needs: the deposit has stopped, and the run-out grows with the aspect ratio. The published
@@ -10,7 +10,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "app/validation.h"
+#include "lab/validation.h"
 #include "tests/support/support.h"
 
 using namespace grains;

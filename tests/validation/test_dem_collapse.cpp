@@ -5,8 +5,8 @@
 // its toe out 0.86 L0 in 0.95 s.
 #include <catch2/catch.hpp>
 
-#include "app/dem_measures.h"
-#include "app/validation.h"
+#include "engine/dem_measures.h"
+#include "lab/validation.h"
 #include "engine/geometry_io.h"
 #include "tests/support/support.h"
 

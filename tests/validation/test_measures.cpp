@@ -1,10 +1,10 @@
-// The measurements and fits behind `grains laws` (app/validation.h), on synthetic particles whose
+// The measurements and fits behind `grains-lab laws` (lab/validation.h), on synthetic particles whose
 // answer is known, so that the law tests beside this file judge the solver, not the ruler.
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "app/dem_measures.h"
-#include "app/validation.h"
+#include "engine/dem_measures.h"
+#include "lab/validation.h"
 
 using namespace grains;
 
@@ -135,7 +135,7 @@ TEST_CASE("fit_beverloo recovers n, k and C from exact Beverloo rates", "[valida
 
 TEST_CASE("heap_angle of a lattice cone is its angle, and a flat layer has none",
           "[validation][measures]") {
-  // The DEM reference's definition (app/dem_measures.h) on the cone above: rings d wide between
+  // The DEM reference's definition (engine/dem_measures.h) on the cone above: rings d wide between
   // 20% and 80% of the peak follow the surface to within one cell, over 0.6 of the flank's
   // 20 d: within about d / (0.6 R), 5 degrees at 30. A fixed bed (mass 0) is not the heap. A
   // layer two grains thick has no ring between 20% and 80% of its peak inside its foot: 0.

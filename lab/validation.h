@@ -1,4 +1,4 @@
-// `grains laws`: validation against published granular laws (DESIGN §7 (c)). Runs the scenes in
+// `grains-lab laws`: validation against published granular laws (DESIGN §7 (c)). Runs the scenes in
 // bench/validation/ (column collapse, silo discharge, poured pile) at several sizes, measures
 // each outcome from the particles, fits the laws, and writes DIR/validation.csv and a Markdown
 // report (VALIDATION.md). See bench/validation/README.md for the laws, sources and methods.

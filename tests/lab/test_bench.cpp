@@ -1,22 +1,22 @@
-// `grains bench` (DESIGN §5, §7): results.csv with its documented header and a row per setting,
+// `grains-lab bench` (DESIGN §5, §7): results.csv with its documented header and a row per setting,
 // the reference's own error 0, pareto.png and the Markdown report.
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
 #include <sstream>
 
-#include "app/bench.h"
+#include "lab/bench.h"
 #include "tests/support/support.h"
 
 using namespace grains;
 using namespace grains::test;
 namespace fs = std::filesystem;
 
-TEST_CASE("bench --quick writes results.csv, pareto.png and the Markdown table", "[bench]") {
+TEST_CASE("bench --quick writes results.csv, pareto.png and the Markdown table", "[bench][lab]") {
   std::string dir = temp_dir("bench_quick");
   std::string scene = source_dir() + "/tests/data/bench_tiny.json";
   std::string md = dir + "/B.md";
-  REQUIRE(run_grains("bench " + scene + " --quick --out " + dir + " --md " + md, dir + "/log") == 0);
+  REQUIRE(run_lab("bench " + scene + " --quick --out " + dir + " --md " + md, dir + "/log") == 0);
 
   std::vector<std::string> lines = split(read_text(dir + "/results.csv"), '\n');
   REQUIRE(lines.size() >= 2);
@@ -70,10 +70,11 @@ TEST_CASE("bench --quick writes results.csv, pareto.png and the Markdown table",
   CHECK_THAT(report, Catch::Contains("bench " + scene + " --quick"));
   CHECK_THAT(report, Catch::Contains("cores"));
   // no temporary result files left behind
-  for (auto& e : fs::directory_iterator(dir)) CHECK(e.path().filename().string().rfind(".run_", 0) != 0);
+  for (auto& e : fs::directory_iterator(dir))
+    CHECK(e.path().filename().string().rfind(".run_", 0) != 0);
 }
 
-TEST_CASE("bench sweep files: defaults, sidecars and errors", "[bench]") {
+TEST_CASE("bench sweep files: defaults, sidecars and errors", "[bench][lab]") {
   std::string dir = temp_dir("bench_sweep");
   BenchSweep d = load_bench_sweep(dir + "/nothing.json");
   CHECK(d.settings.size() == 5);
@@ -92,24 +93,25 @@ TEST_CASE("bench sweep files: defaults, sidecars and errors", "[bench]") {
   CHECK(q.reference == BenchSetting{4, 20});
 }
 
-TEST_CASE("bench refuses a scene without the solver and grains names", "[bench]") {
+TEST_CASE("bench refuses a scene without the solver and grains names", "[bench][lab]") {
   std::string dir = temp_dir("bench_bad");
-  std::string graph = write_file(dir, "x.json", R"({"grains_graph": 1, "name": "x", "frames": 2, "nodes": [
+  std::string graph =
+      write_file(dir, "x.json", R"({"grains_graph": 1, "name": "x", "frames": 2, "nodes": [
     {"name": "src", "type": "source", "params": {"size": [0.1, 0.1, 0.1], "separation": 0.05}},
     {"name": "g", "type": "grains", "inputs": ["src"]},
     {"name": "s", "type": "solver", "inputs": ["g"]}]})");
-  CHECK(run_grains("bench " + graph + " --out " + dir + "/o --md " + dir + "/B.md", dir + "/log") == 2);
+  CHECK(run_lab("bench " + graph + " --out " + dir + "/o --md " + dir + "/B.md", dir + "/log") ==
+        2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("solver node named `solver`"));
   CHECK_FALSE(fs::exists(dir + "/B.md"));
 }
 
-TEST_CASE("bench --repeat runs every setting again and keeps the fastest timings", "[bench]") {
+TEST_CASE("bench --repeat runs every setting again and keeps the fastest timings", "[bench][lab]") {
   std::string dir = temp_dir("bench_repeat");
   std::string scene = source_dir() + "/tests/data/bench_tiny.json";
   std::string md = dir + "/B.md";
-  REQUIRE(run_grains("bench " + scene + " --quick --repeat 2 --threads 1 --out " + dir +
-                         " --md " + md,
-                     dir + "/log") == 0);
+  REQUIRE(run_lab("bench " + scene + " --quick --repeat 2 --threads 1 --out " + dir + " --md " + md,
+                  dir + "/log") == 0);
   std::string log = read_text(dir + "/log");
   // the quick sweep's three settings, each once more in a second round
   size_t repeats = 0;
@@ -121,5 +123,5 @@ TEST_CASE("bench --repeat runs every setting again and keeps the fastest timings
   std::vector<std::string> lines = split(read_text(dir + "/results.csv"), '\n');
   CHECK(lines.size() == 4);  // header and the same three rows
   CHECK_THAT(read_text(md), Catch::Contains("`--repeat 2`"));
-  CHECK(run_grains("bench " + scene + " --repeat 0 --out " + dir + "/o", dir + "/log0") == 2);
+  CHECK(run_lab("bench " + scene + " --repeat 0 --out " + dir + "/o", dir + "/log0") == 2);
 }

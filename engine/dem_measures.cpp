@@ -1,4 +1,4 @@
-#include "app/dem_measures.h"
+#include "engine/dem_measures.h"
 
 #include <algorithm>
 #include <cmath>

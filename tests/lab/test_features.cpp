@@ -1,4 +1,4 @@
-// `grains bench --features` (app/bench_features.h, bench/README.md): features.csv has the
+// `grains-lab features` (lab/features.h, bench/README.md): features.csv has the
 // baseline first, a row per feature with its --set overrides and finite positive figures, and the
 // baseline again last; the report's features section is replaced between its markers and the rest
 // of the report is kept, by this mode and by the sweep; bad invocations exit with code 2.
@@ -7,8 +7,8 @@
 #include <filesystem>
 #include <sstream>
 
-#include "app/bench.h"
-#include "app/bench_features.h"
+#include "lab/bench.h"
+#include "lab/features.h"
 #include "tests/support/support.h"
 
 using namespace grains;
@@ -29,13 +29,13 @@ std::string tiny_scene() {
 
 }  // namespace
 
-TEST_CASE("bench --features writes the baseline, every feature and the baseline again", "[bench]") {
+TEST_CASE("features writes the baseline, every feature and the baseline again", "[bench][lab]") {
   std::string dir = temp_dir("bench_features");
   std::string md = write_file(dir, "B.md", "# Report\n\nkeep this line\n");
   // one thread: the test's timings should not depend on what else the machine is doing
-  REQUIRE(run_grains("bench --features " + tiny_scene() + " --frames 3 --threads 1 --out " + dir +
-                         " --md " + md,
-                     dir + "/log") == 0);
+  REQUIRE(
+      run_lab("features " + tiny_scene() + " --frames 3 --threads 1 --out " + dir + " --md " + md,
+              dir + "/log") == 0);
 
   std::vector<std::string> lines = split(read_text(dir + "/features.csv"), '\n');
   REQUIRE(!lines.empty());
@@ -101,7 +101,7 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
   CHECK_THAT(report, Catch::Contains("| baseline |  |"));
   CHECK_THAT(report, Catch::Contains("| mass_shock_local | `grains.enable_mass_shock_scaling=1` "
                                      "`grains.mass_shock_method=local` |"));
-  CHECK_THAT(report, Catch::Contains("bench --features " + tiny_scene()));
+  CHECK_THAT(report, Catch::Contains("features " + tiny_scene()));
   for (auto& e : fs::directory_iterator(dir))
     CHECK(e.path().filename().string().rfind(".run_", 0) != 0);
 
@@ -109,8 +109,8 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
     const std::string notes =
         std::string(kNotesBegin) + "\n## Notes\n\nhand-written\n" + kNotesEnd + "\n";
     write_file(dir, "B.md", report + "\n" + notes);
-    REQUIRE(run_grains(
-                "bench " + tiny_scene() + " --quick --threads 1 --out " + dir + "/sweep --md " + md,
+    REQUIRE(
+        run_lab("bench " + tiny_scene() + " --quick --threads 1 --out " + dir + "/sweep --md " + md,
                 dir + "/log2") == 0);
     std::string swept = read_text(md);
     CHECK_THAT(swept, Catch::StartsWith("# Benchmarks"));
@@ -120,9 +120,9 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
     CHECK(swept.find(notes) < swept.find(kFeaturesBegin));
   }
   SECTION("--only runs those features between the baselines and replaces the section") {
-    REQUIRE(run_grains("bench --features " + tiny_scene() + " --only clumping,max_neighbors_16 " +
-                           "--frames 2 --threads 1 --out " + dir + " --md " + md,
-                       dir + "/log2") == 0);
+    REQUIRE(run_lab("features " + tiny_scene() + " --only clumping,max_neighbors_16 " +
+                        "--frames 2 --threads 1 --out " + dir + " --md " + md,
+                    dir + "/log2") == 0);
     std::vector<std::string> again = split(read_text(dir + "/features.csv"), '\n');
     REQUIRE(again.size() == 5);
     CHECK(split(again[1], ',')[0] == kFeatureBaseline);
@@ -137,25 +137,23 @@ TEST_CASE("bench --features writes the baseline, every feature and the baseline 
   }
 }
 
-TEST_CASE("bench --features refuses bad invocations with exit code 2", "[bench]") {
+TEST_CASE("features refuses bad invocations with exit code 2", "[bench][lab]") {
   std::string dir = temp_dir("bench_features_bad");
   std::string md = dir + "/B.md";
   std::string args = " --frames 1 --threads 1 --out " + dir + "/o --md " + md;
-  CHECK(run_grains("bench --features " + tiny_scene() + " --only no_such_feature" + args,
-                   dir + "/log") == 2);
+  CHECK(run_lab("features " + tiny_scene() + " --only no_such_feature" + args, dir + "/log") == 2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("unknown feature 'no_such_feature'"));
-  CHECK(run_grains("bench --features " + tiny_scene() + " " + tiny_scene() + args, dir + "/log") ==
-        2);
+  CHECK(run_lab("features " + tiny_scene() + " " + tiny_scene() + args, dir + "/log") == 2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("measures one scene"));
-  CHECK(run_grains("bench " + tiny_scene() + " --only clumping" + args, dir + "/log") ==
-        2);  // needs --features
-  CHECK(run_grains("bench --features " + dir + "/missing.json" + args, dir + "/log") == 2);
+  CHECK(run_lab("bench " + tiny_scene() + " --only clumping" + args, dir + "/log") ==
+        2);  // the sweep has no features
+  CHECK(run_lab("features " + dir + "/missing.json" + args, dir + "/log") == 2);
   std::string graph =
       write_file(dir, "x.json", R"({"grains_graph": 1, "name": "x", "frames": 2, "nodes": [
     {"name": "src", "type": "source", "params": {"size": [0.1, 0.1, 0.1], "separation": 0.05}},
     {"name": "g", "type": "grains", "inputs": ["src"]},
     {"name": "solver", "type": "solver", "inputs": ["g"]}]})");
-  CHECK(run_grains("bench --features " + graph + args, dir + "/log") == 2);
+  CHECK(run_lab("features " + graph + args, dir + "/log") == 2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("grains node named `grains`"));
   // particle-iterations are counted from constant substeps and iterations
   std::string animated =
@@ -163,13 +161,13 @@ TEST_CASE("bench --features refuses bad invocations with exit code 2", "[bench]"
     {"name": "src", "type": "source", "params": {"size": [0.1, 0.1, 0.1], "separation": 0.05}},
     {"name": "grains", "type": "grains", "inputs": ["src"], "params": {"constraint_iterations": "5 + $SF"}},
     {"name": "solver", "type": "solver", "inputs": ["grains"]}]})");
-  CHECK(run_grains("bench --features " + animated + args, dir + "/log") == 2);
+  CHECK(run_lab("features " + animated + args, dir + "/log") == 2);
   CHECK_THAT(read_text(dir + "/log"), Catch::Contains("constant `constraint_iterations`"));
   CHECK_FALSE(fs::exists(md));
   CHECK_FALSE(fs::exists(dir + "/o/features.csv"));
 }
 
-TEST_CASE("bench features section is replaced between its markers only", "[bench]") {
+TEST_CASE("features section is replaced between its markers only", "[bench][lab]") {
   std::string section = std::string(kFeaturesBegin) + "\nnew\n" + kFeaturesEnd + "\n";
   CHECK(splice_features_section("", section) == section);
   CHECK(splice_features_section("# R\n\ntext\n\n\n", section) == "# R\n\ntext\n\n" + section);

@@ -1,6 +1,6 @@
-// `grains laws`: validation against published granular laws. See app/validation.h and
+// `grains-lab laws`: validation against published granular laws. See lab/validation.h and
 // bench/validation/README.md.
-#include "app/validation.h"
+#include "lab/validation.h"
 
 #include <unistd.h>
 
@@ -15,10 +15,11 @@
 #include <functional>
 #include <sstream>
 
-#include "app/dem_measures.h"
-#include "app/options.h"
+#include "cli/options.h"
+#include "engine/dem_measures.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
+#include "lab/source.h"
 
 namespace fs = std::filesystem;
 
@@ -434,17 +435,6 @@ std::string settings_text(const LawSettings& s, const std::string& extra) {
          " mu=" + num(s.friction) + (extra.empty() ? "" : " " + extra);
 }
 
-std::string short_commit() {
-  std::string c;
-  if (FILE* p = popen("git rev-parse --short HEAD 2>/dev/null", "r")) {
-    char buf[64] = {0};
-    if (std::fgets(buf, sizeof buf, p)) c = buf;
-    pclose(p);
-  }
-  while (!c.empty() && std::isspace(static_cast<unsigned char>(c.back()))) c.pop_back();
-  return c;
-}
-
 std::string machine_text(int threads) {
   std::string cpu = "unknown cpu";
   std::ifstream in("/proc/cpuinfo");
@@ -757,13 +747,16 @@ int run_validation(const ValidationOptions& o) {
   {
     std::ofstream md(o.md_path);
     md << "# Validation against published granular laws\n\n"
-       << "Written by `grains laws` (app/validation.cpp); the scenes, laws, sources and methods "
+       << "Written by `grains-lab laws` (lab/validation.cpp); the scenes, laws, sources and "
+          "methods "
           "are "
           "in `bench/validation/README.md`, which also discusses every row that misses its law. "
           "Regenerate with:\n\n```\n"
        << o.command << "\n```\n\n"
        << "- **Date:** " << started << "\n- **Machine:** " << machine << "\n"
-       << "- **Source:** commit `" << short_commit() << "`\n"
+       << "- **Source:** commit `" << lab::source_commit().id << "`"
+       << (lab::source_commit().dirty ? ", built with uncommitted changes (lab/source.h)" : "")
+       << "\n"
        << "- **Plan:** " << (o.quick ? "quick (the tests' sizes)" : "full") << "\n\n"
        << "*difference* is ours minus the expected value; for a band, the distance outside it (0 "
           "inside).\n\n"

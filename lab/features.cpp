@@ -1,15 +1,16 @@
-// `grains bench --features`: the cost of each grains-node feature. See app/bench_features.h and
+// `grains-lab features`: the cost of each grains-node feature. See lab/features.h and
 // bench/README.md.
 //
-// Every row is one forked run of the same scene (app/bench_run.h): the baseline as written, one
+// Every row is one forked run of the same scene (lab/bench_run.h): the baseline as written, one
 // run per feature with its `--set` overrides, and the baseline again last. Cost is the row's
 // stepping time per frame over the first baseline's. The repeated baseline runs the identical
 // simulation, so its cost ratio is the timing noise of the machine during the benchmark and its
 // final positions must match the first baseline's exactly (`moved` 0).
-#include "app/bench_features.h"
+#include "lab/features.h"
 
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -17,8 +18,9 @@
 #include <fstream>
 #include <sstream>
 
-#include "app/bench_run.h"
+#include "cli/options.h"
 #include "engine/graph.h"
+#include "engine/simulation.h"
 
 namespace fs = std::filesystem;
 
@@ -76,33 +78,19 @@ void write_features_csv(const std::vector<FeatureRow>& rows, const std::string& 
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
-// [begin, end) of the section between the markers in `md`, its end line's newline included;
-// false when it has none. The section ends at the first end marker and starts at the last begin
-// marker before it, so a stray begin marker never makes it swallow the text that follows.
-bool find_marked_section(const std::string& md, const char* begin_marker, const char* end_marker,
-                         size_t& begin, size_t& end) {
-  end = md.find(end_marker);
-  if (end == std::string::npos) return false;
-  begin = md.rfind(begin_marker, end);
-  if (begin == std::string::npos) return false;
-  end += std::string(end_marker).size();
-  if (end < md.size() && md[end] == '\n') ++end;
-  return true;
-}
-
 bool find_features_section(const std::string& md, size_t& begin, size_t& end) {
   return find_marked_section(md, kFeaturesBegin, kFeaturesEnd, begin, end);
 }
 
-std::string features_markdown(const std::vector<FeatureRow>& rows, const BenchOptions& o,
+std::string features_markdown(const std::vector<FeatureRow>& rows, const FeatureOptions& o,
                               const std::string& path, const bench::Machine& m, int threads) {
   using bench::fmt;
   const BenchRow& b = rows.front().run;
   std::ostringstream md;
   md << kFeaturesBegin << "\n"
      << "## Feature cost: " << b.scene << "\n\n"
-     << "What each `grains` node feature costs when it is on, written by `grains bench "
-        "--features` (see `bench/README.md`); only this section is rewritten by it. `"
+     << "What each `grains` node feature costs when it is on, written by `grains-lab "
+        "features` (see `bench/README.md`); only this section is rewritten by it. `"
      << path << "` as written (" << b.setting.substeps << " substeps x " << b.setting.iterations
      << " iterations, " << b.points << " grains at the final frame, " << b.frames
      << " frames) is the baseline; every other row changes only the parameters shown, exactly as "
@@ -177,18 +165,6 @@ const char* features_csv_header() {
          "mean_penetration,moved_radii,compared";
 }
 
-std::string marked_section_of(const std::string& md, const char* begin, const char* end) {
-  size_t b = 0, e = 0;
-  if (!find_marked_section(md, begin, end, b, e)) return "";
-  std::string s = md.substr(b, e - b);
-  if (s.back() != '\n') s += '\n';
-  return s;
-}
-
-std::string features_section_of(const std::string& md) {
-  return marked_section_of(md, kFeaturesBegin, kFeaturesEnd);
-}
-
 std::string splice_features_section(const std::string& md, const std::string& section) {
   size_t b = 0, e = 0;
   if (find_features_section(md, b, e)) return md.substr(0, b) + section + md.substr(e);
@@ -198,11 +174,11 @@ std::string splice_features_section(const std::string& md, const std::string& se
   return out + "\n\n" + section;
 }
 
-int run_feature_bench(const BenchOptions& o) {
+int run_feature_bench(const FeatureOptions& o) {
   // check the scene, the selection and every override before anything runs
   if (o.scenes.size() > 1)
     throw LoadError(
-        "--features", "",
+        "features", "",
         "measures one scene, got " + std::to_string(o.scenes.size()) + " (bench/README.md)");
   const std::string path = o.scenes.empty() ? kFeaturesDefaultScene : o.scenes.front();
   Graph g = load_graph(path);
@@ -297,7 +273,8 @@ int run_feature_bench(const BenchOptions& o) {
 
   if (have_base && o.repeat > 1) {  // costs from the fastest timings
     base_spf = rows.front().run.s_per_frame();
-    for (auto& r : rows) r.cost_ratio = base_spf > 0 ? r.run.s_per_frame() / base_spf : std::nan("");
+    for (auto& r : rows)
+      r.cost_ratio = base_spf > 0 ? r.run.s_per_frame() / base_spf : std::nan("");
   }
   std::string csv = o.out_dir + "/features.csv";
   write_features_csv(rows, csv);
@@ -326,6 +303,34 @@ int run_feature_bench(const BenchOptions& o) {
   fs::rename(tmp, o.md_path);
   std::fprintf(stderr, "wrote %s and the features section of %s\n", csv.c_str(), o.md_path.c_str());
   return failures ? 1 : 0;
+}
+
+CLI::App* add_features_command(CLI::App& app, FeatureOptions& o, int argc, char** argv) {
+  auto* f = app.add_subcommand(
+      "features",
+      "the cost of each grains feature on one scene as written; writes features.csv and the "
+      "report's features section");
+  f->add_option("scene", o.scenes, "one scene graph (default bench/settle_100k.json)");
+  std::string names;
+  for (const auto& b : bench_features()) names += (names.empty() ? "" : ", ") + b.name;
+  f->add_option("--only", o.only, "only these features (comma-separated): " + names)
+      ->delimiter(',');
+  f->add_option("--out", o.out_dir, "output folder for features.csv (default out/bench)");
+  f->add_option("--md", o.md_path,
+                "Markdown report whose features section to rewrite (default "
+                "BENCHMARKS.md)");
+  f->add_flag("--quick", o.quick, "at most 12 frames");
+  f->add_option("--frames", o.frames, "frames per run (default: the sweep file's or the graph's)")
+      ->check(positive_number());
+  f->add_option("--threads", o.threads, "worker threads (default: all cores)")
+      ->check(CLI::Range(1, kMaxThreads));
+  f->add_option("--repeat", o.repeat,
+                "run every row this many times, in rounds; report the fastest timings (default 1)")
+      ->check(positive_number());
+  std::string cmd;
+  for (int k = 0; k < argc; ++k) cmd += (k ? " " : "") + bench::quote_arg(argv[k]);
+  o.command = cmd;
+  return f;
 }
 
 }  // namespace grains

@@ -25,7 +25,6 @@
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"  // kMaxThreads
-#include "viewer-offline/gif.h"
 #include "viewer-offline/render.h"
 
 namespace grains::viewer {
@@ -332,28 +331,29 @@ std::string join(const std::vector<std::string>& v) {
   return s.empty() ? "(none)" : s;
 }
 
-// Where the rendered frames go besides PNG: ffmpeg through a pipe, or our own GIF writer.
+// Where the rendered frames go besides PNG: raw RGB frames piped to ffmpeg, which writes the
+// video. For a .gif it makes one palette for the whole clip and maps every frame onto it
+// (palettegen, paletteuse), at half size above 640 pixels wide, as GIFs are big.
 class VideoSink {
  public:
-  // Throws BadInput when the file cannot be made here (mp4 without ffmpeg).
+  // Throws BadInput when ffmpeg is not on PATH.
   VideoSink(const std::string& path, int width, int height, double fps) : path_(path) {
-    if (lower(fs::path(path).extension().string()) == ".gif") {
-      factor_ = width > 640 ? 2 : 1;  // GIFs are big: half size above 640 pixels wide
-      gif_ = std::make_unique<GifWriter>(path, width / factor_, height / factor_,
-                                         std::max(2, static_cast<int>(std::lround(100.0 / fps))));
-      return;
-    }
     std::string ffmpeg = find_on_path("ffmpeg");
     if (ffmpeg.empty())
       throw BadInput("--video " + path +
-                     ": writing this needs ffmpeg on PATH, and there is none; "
-                     "install it (apt-get install ffmpeg) or ask for a .gif, which needs nothing");
+                     ": writing a video needs ffmpeg on PATH, and there is none; "
+                     "install it (apt-get install ffmpeg)");
     char num[64];
     std::snprintf(num, sizeof num, "%dx%d -framerate %g", width, height, fps);
-    // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
-    std::string cmd = shell_quote(ffmpeg) + " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " +
-                      num + " -i - -vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") +
-                      " -pix_fmt yuv420p " + shell_quote(path);
+    std::string output;  // the filter and the output's options
+    if (lower(fs::path(path).extension().string()) == ".gif")
+      output = "-vf " + shell_quote(std::string(width > 640 ? "scale=iw/2:ih/2:flags=area," : "") +
+                                    "split[a][b];[a]palettegen[p];[b][p]paletteuse");
+    else  // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
+      output = "-vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") + " -pix_fmt yuv420p";
+    const std::string cmd = shell_quote(ffmpeg) +
+                            " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " + num + " -i - " +
+                            output + " " + shell_quote(path);
     std::signal(SIGPIPE, SIG_IGN);  // a dying ffmpeg must give a write error, not kill us
     pipe_ = ::popen(cmd.c_str(), "w");
     if (!pipe_) throw std::runtime_error("cannot start " + ffmpeg);
@@ -362,18 +362,10 @@ class VideoSink {
     if (pipe_) ::pclose(pipe_);
   }
   void add(const Image& img) {
-    if (gif_) {
-      gif_->add_frame(factor_ > 1 ? downscale(img, factor_) : img);
-      return;
-    }
     if (std::fwrite(img.rgb.data(), 1, img.rgb.size(), pipe_) != img.rgb.size())
       throw std::runtime_error("ffmpeg stopped taking frames for " + path_);
   }
   void finish() {
-    if (gif_) {
-      gif_->close();
-      return;
-    }
     int rc = ::pclose(pipe_);
     pipe_ = nullptr;
     if (rc != 0) throw std::runtime_error("ffmpeg failed writing " + path_);
@@ -381,8 +373,6 @@ class VideoSink {
 
  private:
   std::string path_;
-  std::unique_ptr<GifWriter> gif_;
-  int factor_ = 1;
   std::FILE* pipe_ = nullptr;
 };
 
@@ -431,8 +421,7 @@ int run(const RenderOptions& opts) {
       throw BadInput("--video " + opts.video + ": the folder " + parent.string() +
                      " does not exist");
   }
-  if (!opts.video.empty() && lower(fs::path(opts.video).extension().string()) != ".gif" &&
-      find_on_path("ffmpeg").empty())
+  if (!opts.video.empty() && find_on_path("ffmpeg").empty())
     VideoSink(opts.video, W, H, fps);  // throws BadInput with the message
 
   // ---- pass 1: bounds and colour range over all frames ----
@@ -572,7 +561,8 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
                 "attribute to colour by: v (speed), id, pscale, strain (edges), any float or int "
                 "attribute, a vector (its magnitude) or NAME.x/.y/.z; the range spans all frames");
   r->add_option("--video", o.video,
-                "also write a video: FILE.mp4 (needs ffmpeg) or FILE.gif (built in)");
+                "also write a video through ffmpeg: FILE.mp4, FILE.gif (one palette for the clip), "
+                "or anything ffmpeg writes");
   r->add_option("--camera", o.camera,
                 "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "
                 "(default: frames every grain of every frame)");

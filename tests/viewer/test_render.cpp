@@ -1,5 +1,5 @@
 // The offline viewer: projection, z-buffered spheres, colour-by and its bar, edges, colliders,
-// the contact sheet, the render command's files and exit codes, the GIF writer.
+// the contact sheet, the render command's files, videos through ffmpeg and exit codes.
 #include <omp.h>
 #include <sys/wait.h>
 
@@ -15,7 +15,6 @@
 #include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
 #include "tests/support/support.h"
-#include "viewer-offline/gif.h"
 #include "viewer-offline/render.h"
 
 #pragma GCC diagnostic push
@@ -422,14 +421,13 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
   std::string out = dir + "/pictures";
   REQUIRE(test::run_grains("run " + graph + " --out " + sim + " --quiet", log) == 0);
   CHECK(test::run_grains("render " + sim + " --graph " + graph + " --out " + out +
-                             " --size 96x64 --color-by v --video " + dir + "/a.gif",
+                             " --size 96x64 --color-by v",
                          log) == 0);
   INFO(test::read_text(log));
   CHECK(test::read_text(log).find("warning") == std::string::npos);
   CHECK(std::filesystem::exists(out + "/frame_0001.png"));
   CHECK(std::filesystem::exists(out + "/frame_0002.png"));
   CHECK(std::filesystem::exists(out + "/contact_sheet.png"));
-  CHECK(std::filesystem::exists(dir + "/a.gif"));
 
   SECTION("bad input exits 2 with a message") {
     CHECK(test::run_grains("render " + dir + "/missing", log) == 2);
@@ -449,6 +447,13 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
     CHECK(WEXITSTATUS(rc) == 2);
     CHECK(test::read_text(log).find("ffmpeg") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir + "/a.mp4"));
+    // a GIF too: ffmpeg makes it
+    cmd = "PATH=" + empty + " " + std::string(GRAINS_BINARY) + " render " + dir +
+          " --size 32x24 --video " + dir + "/a.gif > " + log + " 2>&1";
+    rc = std::system(cmd.c_str());
+    CHECK(WEXITSTATUS(rc) == 2);
+    CHECK(test::read_text(log).find("needs ffmpeg on PATH") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir + "/a.gif"));
   }
   SECTION("with ffmpeg on PATH, raw RGB frames are piped to it") {
     // a stand-in ffmpeg that records its arguments and copies stdin into the output file
@@ -465,6 +470,22 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
     CHECK(std::filesystem::file_size(dir + "/a.mp4") == 2u * 32 * 24 * 3);
     std::string args = test::read_text(bin + "/args");
     CHECK(args.find("-pix_fmt rgb24 -s 32x24 -framerate 12") != std::string::npos);
+    CHECK(args.find("-pix_fmt yuv420p") != std::string::npos);
+    // a GIF: one palette for the clip (palettegen, paletteuse), half size above 640 pixels
+    for (const std::string size : {"32x24", "642x24"}) {
+      const bool wide = size == "642x24";
+      cmd = "PATH=" + bin + ":$PATH " + std::string(GRAINS_BINARY) + " render " + dir +
+            " --size " + size + " --supersample 1 --video " + dir + "/a.gif > " + log + " 2>&1";
+      rc = std::system(cmd.c_str());
+      INFO(test::read_text(log));
+      CHECK(WEXITSTATUS(rc) == 0);
+      args = test::read_text(bin + "/args");
+      CHECK(args.find("-pix_fmt rgb24 -s " + size) != std::string::npos);
+      CHECK(args.find("split[a][b];[a]palettegen[p];[b][p]paletteuse") != std::string::npos);
+      CHECK((args.find("scale=iw/2:ih/2") != std::string::npos) == wide);
+      // the stand-in copies the raw frames: two at full size, ffmpeg scales
+      CHECK(std::filesystem::file_size(dir + "/a.gif") == 2u * 3 * 24 * (wide ? 642 : 32));
+    }
   }
 }
 
@@ -593,134 +614,6 @@ TEST_CASE("render command: a missing or damaged collider_poses.csv warns or is r
       CHECK(test::run_grains("render " + sim + pics + " --size 32x24 --quiet", log) == 2);
       CHECK_THAT(test::read_text(log), Catch::Contains("grains render: error: " + poses_b + ":"));
     }
-  }
-}
-
-namespace {
-// A GIF decoder just big enough to read back what GifWriter writes: the global palette and each
-// frame's indices.
-struct Gif {
-  int width = 0, height = 0;
-  std::vector<uint8_t> palette;
-  std::vector<std::vector<uint8_t>> frames;
-};
-bool decode_gif(const std::vector<uint8_t>& b, Gif& g) {
-  if (b.size() < 13 || std::string(b.begin(), b.begin() + 6) != "GIF89a") return false;
-  g.width = b[6] | b[7] << 8;
-  g.height = b[8] | b[9] << 8;
-  size_t k = 13;
-  if (b[10] & 0x80) {
-    size_t n = 3u << ((b[10] & 7) + 1);
-    g.palette.assign(b.begin() + k, b.begin() + k + n);
-    k += n;
-  }
-  while (k < b.size()) {
-    uint8_t tag = b[k++];
-    if (tag == 0x3B) return true;
-    if (tag == 0x21) {  // extension: label, sub-blocks
-      ++k;
-      while (b[k]) k += b[k] + 1;
-      ++k;
-      continue;
-    }
-    if (tag != 0x2C) return false;
-    k += 9;
-    int min_size = b[k++];
-    std::vector<uint8_t> data;
-    while (b[k]) {
-      data.insert(data.end(), b.begin() + k + 1, b.begin() + k + 1 + b[k]);
-      k += b[k] + 1;
-    }
-    ++k;
-    // LZW decode
-    const int clear = 1 << min_size, end = clear + 1;
-    std::vector<std::vector<uint8_t>> dict;
-    auto reset = [&] {
-      dict.clear();
-      for (int c = 0; c < clear + 2; ++c) dict.push_back({static_cast<uint8_t>(c)});
-    };
-    reset();
-    int size = min_size + 1, prev = -1;
-    size_t bitpos = 0;
-    std::vector<uint8_t> out;
-    for (;;) {
-      if ((bitpos + size + 7) / 8 > data.size()) return false;
-      int code = 0;
-      for (int i = 0; i < size; ++i, ++bitpos)
-        code |= ((data[bitpos / 8] >> (bitpos % 8)) & 1) << i;
-      if (code == clear) {
-        reset();
-        size = min_size + 1;
-        prev = -1;
-        continue;
-      }
-      if (code == end) break;
-      std::vector<uint8_t> entry;
-      if (code < static_cast<int>(dict.size())) {
-        entry = dict[code];
-        if (prev >= 0) {
-          auto e = dict[prev];
-          e.push_back(entry[0]);
-          dict.push_back(e);
-        }
-      } else {
-        if (prev < 0 || code != static_cast<int>(dict.size())) return false;
-        entry = dict[prev];
-        entry.push_back(entry[0]);
-        dict.push_back(entry);
-      }
-      out.insert(out.end(), entry.begin(), entry.end());
-      prev = code;
-      if (static_cast<int>(dict.size()) == (1 << size) && size < 12) ++size;
-    }
-    g.frames.push_back(out);
-  }
-  return false;
-}
-}  // namespace
-
-TEST_CASE("GIF writer: palette colours round-trip through LZW", "[viewer]") {
-  std::string dir = test::temp_dir("gif");
-  const auto& pal = gif_palette();
-  REQUIRE(pal.size() == 768);
-  // frames of palette colours (noise, so the code table fills and clears many times)
-  std::mt19937 rng(5);
-  std::vector<Image> frames;
-  for (int f = 0; f < 2; ++f) {
-    Image img(150, 97);
-    for (int y = 0; y < img.height; ++y)
-      for (int x = 0; x < img.width; ++x) {
-        int c = (f == 0) ? static_cast<int>(rng() % 252) : (x / 10 + y / 7) % 252;
-        uint8_t* p = img.px(x, y);
-        p[0] = pal[3 * c];
-        p[1] = pal[3 * c + 1];
-        p[2] = pal[3 * c + 2];
-      }
-    frames.push_back(img);
-  }
-  {
-    GifWriter w(dir + "/t.gif", 150, 97, 4);
-    for (const auto& f : frames) w.add_frame(f);
-  }
-  std::ifstream in(dir + "/t.gif", std::ios::binary);
-  std::vector<uint8_t> bytes_((std::istreambuf_iterator<char>(in)),
-                              std::istreambuf_iterator<char>());
-  Gif g;
-  REQUIRE(decode_gif(bytes_, g));
-  CHECK(g.width == 150);
-  CHECK(g.height == 97);
-  REQUIRE(g.frames.size() == 2);
-  for (int f = 0; f < 2; ++f) {
-    REQUIRE(g.frames[f].size() == 150u * 97u);
-    bool same = true;
-    for (int y = 0; y < 97; ++y)
-      for (int x = 0; x < 150; ++x) {
-        int i = g.frames[f][y * 150 + x];
-        const uint8_t* p = frames[f].px(x, y);
-        same = same && g.palette[3 * i] == p[0] && g.palette[3 * i + 1] == p[1] &&
-               g.palette[3 * i + 2] == p[2];
-      }
-    CHECK(same);
   }
 }
 

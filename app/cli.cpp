@@ -13,8 +13,10 @@
 #include <iostream>
 
 #include "cli/options.h"
+#include "engine/collider_poses.h"
 #include "engine/cook.h"
 #include "engine/dem_measures.h"
+#include "engine/frame_writer.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/schema.h"
@@ -44,12 +46,14 @@ void progress(int done, int total, double ms, size_t points) {
   std::fflush(stderr);
 }
 
-// What a run writes in its folder: frames, stats.csv, and their .tmp files while writing.
+// What a run writes in its folder: frames, stats.csv, collider_poses.csv, and the frames' .tmp
+// files while writing.
 bool run_owns(const std::filesystem::path& p) {
   const std::string name = p.filename().string();
   const std::string stem =
       name.size() > 4 && name.ends_with(".tmp") ? name.substr(0, name.size() - 4) : name;
-  return stem == "stats.csv" || (stem.starts_with("frame_") && stem.ends_with(".ply"));
+  return stem == "stats.csv" || stem == kColliderPosesFile ||
+         (stem.starts_with("frame_") && stem.ends_with(".ply"));
 }
 
 LoadError used_folder(const std::string& dir, const std::string& what) {
@@ -136,9 +140,9 @@ int cmd_run(const std::string& path, const std::string& out_override, int frames
     if (auto it = d.params.find("file"); it != d.params.end() && !it->second.text.empty())
       inputs.push_back(resolve_path(g.base_dir, it->second.text));
   prepare_output(dirs, overwrite, inputs);
-  std::vector<std::unique_ptr<FrameWriter>> writers;
+  std::vector<std::unique_ptr<FrameSink>> sinks;
   for (const std::string& dir : dirs)
-    writers.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+    sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
   bool tty = isatty(fileno(stderr)) && !quiet;
   std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
   for (int f = 1; f <= g.frames; ++f) {
@@ -148,7 +152,7 @@ int cmd_run(const std::string& path, const std::string& out_override, int frames
     for (size_t k = 0; k < sim.object_count(); ++k) {
       const SimObject& o = sim.object(k);
       say_precision(o, quiet, precision_said[k]);
-      writers[k]->write(f, o.pts, o.stats, f % g.output.every == 0);
+      sinks[k]->write(frame_output(f, o, f % g.output.every == 0));
       points += o.pts.size();
       ms += o.stats.wall_ms;
     }
@@ -294,7 +298,8 @@ int cli_main(int argc, char** argv) {
                   "the most points the run may hold (default 20000000, about 12 GB)")
       ->check(positive_number());
   run->add_flag("--overwrite", overwrite,
-                "replace the frames and stats.csv an earlier run left in the output folder");
+                "replace the frames, stats.csv and collider_poses.csv an earlier run left in "
+                "the output folder");
 
   auto* validate = app.add_subcommand("validate", "load and check a graph without running it");
   validate->add_option("graph", graph_path, "graph file (JSON)")->required();
@@ -316,7 +321,8 @@ int cli_main(int argc, char** argv) {
   cook->add_option("--threads", threads, "worker threads")->check(CLI::Range(1, kMaxThreads));
   cook->add_option("--out", cook_out, "output folder")->required();
   cook->add_flag("--overwrite", overwrite,
-                 "replace the frames and stats.csv an earlier cook left in the output folder");
+                 "replace the frames, stats.csv and collider_poses.csv an earlier cook left in "
+                 "the output folder");
 
   std::string heap_frame;
   double heap_d = 0, heap_cx = 0, heap_cz = 0;

@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/frame_writer.h"
 #include "engine/graph.h"
 
 namespace grains {
@@ -54,19 +55,16 @@ void cook_node(const std::string& type,
   }
   Simulation sim(graph, opt.threads);
   sim.set_points(0, std::move(state));
-  FrameWriter* writer = nullptr;
-  std::unique_ptr<FrameWriter> owned;
-  if (!opt.out_dir.empty()) {
-    owned = std::make_unique<FrameWriter>(opt.out_dir, std::vector<std::string>{}, true);
-    writer = owned.get();
-  }
+  std::unique_ptr<FrameSink> writer;
+  if (!opt.out_dir.empty())
+    writer = std::make_unique<FrameWriter>(opt.out_dir, std::vector<std::string>{}, true);
   for (int f = 0; f < opt.frames; ++f) {
     try {  // an expression's value out of range at this frame
       sim.step_frame();
     } catch (const LoadError& e) {
       throw e.file == opt.source ? as_set(e) : e;
     }
-    if (writer) writer->write(sim.frame(), sim.object(0).pts, sim.object(0).stats, true);
+    if (writer) writer->write(frame_output(sim.frame(), sim.object(0), true));
   }
   state = std::move(sim.object(0).pts);
 }

@@ -1,14 +1,10 @@
 #include "engine/simulation.h"
 
 #include <omp.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
-#include <filesystem>
 #include <limits>
 #include <set>
 #include <stdexcept>
@@ -541,76 +537,6 @@ void measure_frame(const ParticleStore& pts, FrameStats& st) {
     }
   st.max_penetration = pen.max;
   st.mean_penetration = pen.count ? static_cast<float>(pen.sum / pen.count) : 0.0f;
-}
-
-namespace {
-
-// Appends `text` to the file at `path` (created when `fresh`), all of it or nothing: a failed
-// write (disk full, ...) cuts the file back to its old length and throws WriteError.
-void append_text(const std::string& path, const std::string& text, bool fresh) {
-  std::error_code ec;
-  const auto old_size = fresh ? std::uintmax_t(0) : std::filesystem::file_size(path, ec);
-  FILE* f = std::fopen(path.c_str(), fresh ? "w" : "a");
-  if (!f) throw WriteError(path + ": cannot write (" + std::strerror(errno) + ")");
-  bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-  int err = ok ? 0 : errno;
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (ok) return;
-  if (!ec) std::filesystem::resize_file(path, old_size, ec);
-  throw WriteError(path + ": cannot write (" + std::strerror(err) + ")");
-}
-
-std::string format(const char* fmt, auto... args) {
-  int n = std::snprintf(nullptr, 0, fmt, args...);
-  std::string out(static_cast<size_t>(n), '\0');
-  std::snprintf(out.data(), out.size() + 1, fmt, args...);
-  return out;
-}
-
-}  // namespace
-
-FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
-    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all) {
-  // a folder the user named that cannot be made or written in is bad input, refused before any
-  // frame runs; a write that fails later (disk full) is a failure of the run
-  std::error_code ec;
-  std::filesystem::create_directories(dir_, ec);
-  if (ec) throw LoadError(dir_, "", "cannot make the output folder (" + ec.message() + ")");
-  if (access(dir_.c_str(), W_OK | X_OK) != 0)
-    throw LoadError(dir_, "", std::string("cannot write in the output folder (") +
-                                  std::strerror(errno) + ")");
-  append_text(dir_ + "/stats.csv",
-              "frame,time,points,constraints,wall_ms,max_penetration,mean_penetration,max_strain,"
-              "kinetic_energy,substeps,error\n",
-              true);
-  std::filesystem::remove(dir_ + "/colliders.csv", ec);  // written from the first frame with feedback
-}
-
-void FrameWriter::write(int frame, const ParticleStore& pts, const FrameStats& s, bool ply) {
-  if (ply) {
-    char name[64];
-    std::snprintf(name, sizeof name, "/frame_%04d.ply", frame);
-    if (all_)
-      write_ply_all(dir_ + name, pts);
-    else
-      write_ply(dir_ + name, pts, attributes_);
-  }
-  append_text(dir_ + "/stats.csv",
-              format("%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
-                     s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
-                     s.max_strain, s.kinetic_energy, s.substeps, s.error),
-              false);
-  if (s.colliders.empty()) return;
-  const std::string path = dir_ + "/colliders.csv";
-  const bool fresh = !std::filesystem::exists(path);
-  std::string rows = fresh ? "frame,time,collider,fx,fy,fz,tx,ty,tz\n" : "";
-  for (const auto& c : s.colliders)
-    rows += format("%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
-                   c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
-  append_text(path, rows, fresh);
 }
 
 }  // namespace grains

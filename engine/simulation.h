@@ -118,18 +118,4 @@ class Simulation {
 // Computes the per-frame diagnostics of an object's points (penetration, energy, strain).
 void measure_frame(const ParticleStore& pts, FrameStats& stats);
 
-// Writes frames and stats.csv (DESIGN §6) into one folder, and colliders.csv
-// (frame,time,collider,fx,fy,fz,tx,ty,tz) for frames with collision feedback.
-class FrameWriter {
- public:
-  FrameWriter(std::string dir, std::vector<std::string> attributes, bool all_attributes = false);
-  void write(int frame, const ParticleStore& pts, const FrameStats& stats, bool write_ply);
-  const std::string& dir() const { return dir_; }
-
- private:
-  std::string dir_;
-  std::vector<std::string> attributes_;
-  bool all_ = false;
-};
-
 }  // namespace grains

@@ -1,6 +1,7 @@
 // The offline viewer (DESIGN §1, §5): `grains render DIR` turns a folder of written frames
 // (DIR/frame_0001.ply …, DESIGN §6) into PNG frames, a contact sheet and a video, without a
-// window or a GPU.
+// window or a GPU. It reads only what the run wrote: the colliders are drawn where the run posed
+// them (DIR/collider_poses.csv, docs/output-format.md), never by evaluating the graph again.
 //
 // How a frame is drawn (render_frame), at `supersample` times the camera's resolution:
 //   1. grains: each sphere is splatted over its exact screen-space bounding box; every pixel of
@@ -155,7 +156,7 @@ Image contact_sheet(const std::vector<Image>& frames, const std::vector<int>& fr
 struct RenderOptions {
   std::string dir;       // folder of frame_NNNN.ply (or of one sub-folder per object)
   std::string out;       // output folder; default DIR/render
-  std::string graph;     // graph file: colliders and fps
+  std::string graph;     // graph file: its fps; asks for the colliders the run recorded
   std::string color_by;  // attribute to colour by
   std::string video;     // .mp4 (or anything ffmpeg writes) via ffmpeg; .gif written here
   std::string camera;    // "ex,ey,ez,tx,ty,tz,fov"; empty = frame everything

@@ -21,11 +21,10 @@
 #include <sstream>
 
 #include "cli/options.h"
+#include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
-#include "engine/simulation.h"
-#include "nodes/register.h"
-#include "viewer-offline/gif.h"
+#include "engine/simulation.h"  // kMaxThreads
 #include "viewer-offline/render.h"
 
 namespace grains::viewer {
@@ -156,43 +155,65 @@ std::string shell_quote(const std::string& s) {
   return q + "'";
 }
 
-// The colliders of a graph, posed at any moment from their own parameter tables.
-struct GraphColliders {
-  struct Entry {
-    const NodeDesc* node;
-    ParamSet params;
-    std::string object;  // the first solver that lists it, for $OBJNAME
-  };
-  std::string graph_file, graph_name;
-  double fps = 24;
-  std::vector<Entry> entries;
+// The same collider in the same place: name, shape and pose alike, bit for bit.
+bool same_collider(const ColliderState& a, const ColliderState& b) {
+  const Shape &p = a.shape, &q = b.shape;
+  bool same = a.name == b.name && p.kind == q.kind && p.size.x == q.size.x &&
+              p.size.y == q.size.y && p.size.z == q.size.z && p.radius == q.radius &&
+              p.tube == q.tube && p.height == q.height && a.pose.t.x == b.pose.t.x &&
+              a.pose.t.y == b.pose.t.y && a.pose.t.z == b.pose.t.z && a.pose.s == b.pose.s;
+  for (int k = 0; k < 9; ++k) same = same && a.pose.R[k] == b.pose.R[k];
+  return same;
+}
 
-  std::vector<ColliderState> at(double st) {
+// The colliders as the run posed them (DIR/collider_poses.csv, one per object folder; written by
+// engine/frame_writer.h), read instead of evaluating the graph again: an expression that uses
+// the object's variables (OBJ, OBJID, NOBJ) is drawn where it was simulated.
+struct RecordedColliders {
+  std::vector<std::map<int, std::vector<ColliderState>>> objects;  // per object with a file
+  std::vector<std::string> missing;  // object folders without a pose file
+  std::vector<int> frames_without;   // rendered frames that a non-empty pose file lacks
+
+  // Every object's colliders at `frame`, in object then file order; a collider that several
+  // solvers share is drawn once where they posed it alike, and once per pose where its
+  // expressions placed it differently for each (e.g. by $OBJID).
+  std::vector<ColliderState> at(int frame) {
     std::vector<ColliderState> out;
-    for (Entry& e : entries) {
-      ExprVars v;
-      v.ST = st;
-      v.T = st;
-      v.TIMESTEP = 1.0 / fps;
-      v.SFPS = fps;
-      v.SF = st * fps;
-      v.F = v.SF + 1;
-      v.OBJNAME = e.object;
-      v.DOPNET = graph_name;
-      try {
-        e.params.evaluate(v);
-      } catch (const ParamRangeError& err) {  // the message `run` gives for the same graph
-        throw LoadError(graph_file, e.node->pointer + "/params/" + err.param,
-                        "frame " + std::to_string(static_cast<long long>(v.F)) + ": " + err.what());
+    bool lacking = false;
+    for (const auto& poses : objects) {
+      if (poses.empty()) continue;  // a solver without colliders
+      auto it = poses.find(frame);
+      if (it == poses.end()) {
+        lacking = true;
+        continue;
       }
-      ColliderState c;
-      e.node->info->collider(e.params, c);
-      c.name = e.node->name;
-      out.push_back(c);
+      for (const ColliderState& c : it->second) {
+        bool seen = false;
+        for (const ColliderState& o : out) seen = seen || same_collider(o, c);
+        if (!seen) out.push_back(c);
+      }
     }
+    if (lacking) frames_without.push_back(frame);
     return out;
   }
 };
+
+// Reads the pose file of each object folder. A damaged file is bad input (GeometryError); a
+// missing one is noted in `missing`.
+RecordedColliders read_recorded_colliders(const std::string& dir,
+                                          const std::vector<std::string>& objects) {
+  RecordedColliders r;
+  for (const std::string& o : objects) {
+    const fs::path path = fs::path(dir) / o / kColliderPosesFile;
+    std::error_code ec;
+    if (!fs::exists(path, ec)) {
+      r.missing.push_back(path.string());
+      continue;
+    }
+    r.objects.push_back(read_collider_poses(path.string()));
+  }
+  return r;
+}
 
 // What the first pass learns from every frame.
 struct Survey {
@@ -310,28 +331,29 @@ std::string join(const std::vector<std::string>& v) {
   return s.empty() ? "(none)" : s;
 }
 
-// Where the rendered frames go besides PNG: ffmpeg through a pipe, or our own GIF writer.
+// Where the rendered frames go besides PNG: raw RGB frames piped to ffmpeg, which writes the
+// video. For a .gif it makes one palette for the whole clip and maps every frame onto it
+// (palettegen, paletteuse), at half size above 640 pixels wide, as GIFs are big.
 class VideoSink {
  public:
-  // Throws BadInput when the file cannot be made here (mp4 without ffmpeg).
+  // Throws BadInput when ffmpeg is not on PATH.
   VideoSink(const std::string& path, int width, int height, double fps) : path_(path) {
-    if (lower(fs::path(path).extension().string()) == ".gif") {
-      factor_ = width > 640 ? 2 : 1;  // GIFs are big: half size above 640 pixels wide
-      gif_ = std::make_unique<GifWriter>(path, width / factor_, height / factor_,
-                                         std::max(2, static_cast<int>(std::lround(100.0 / fps))));
-      return;
-    }
     std::string ffmpeg = find_on_path("ffmpeg");
     if (ffmpeg.empty())
       throw BadInput("--video " + path +
-                     ": writing this needs ffmpeg on PATH, and there is none; "
-                     "install it (apt-get install ffmpeg) or ask for a .gif, which needs nothing");
+                     ": writing a video needs ffmpeg on PATH, and there is none; "
+                     "install it (apt-get install ffmpeg)");
     char num[64];
     std::snprintf(num, sizeof num, "%dx%d -framerate %g", width, height, fps);
-    // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
-    std::string cmd = shell_quote(ffmpeg) + " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " +
-                      num + " -i - -vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") +
-                      " -pix_fmt yuv420p " + shell_quote(path);
+    std::string output;  // the filter and the output's options
+    if (lower(fs::path(path).extension().string()) == ".gif")
+      output = "-vf " + shell_quote(std::string(width > 640 ? "scale=iw/2:ih/2:flags=area," : "") +
+                                    "split[a][b];[a]palettegen[p];[b][p]paletteuse");
+    else  // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
+      output = "-vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") + " -pix_fmt yuv420p";
+    const std::string cmd = shell_quote(ffmpeg) +
+                            " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " + num + " -i - " +
+                            output + " " + shell_quote(path);
     std::signal(SIGPIPE, SIG_IGN);  // a dying ffmpeg must give a write error, not kill us
     pipe_ = ::popen(cmd.c_str(), "w");
     if (!pipe_) throw std::runtime_error("cannot start " + ffmpeg);
@@ -340,18 +362,10 @@ class VideoSink {
     if (pipe_) ::pclose(pipe_);
   }
   void add(const Image& img) {
-    if (gif_) {
-      gif_->add_frame(factor_ > 1 ? downscale(img, factor_) : img);
-      return;
-    }
     if (std::fwrite(img.rgb.data(), 1, img.rgb.size(), pipe_) != img.rgb.size())
       throw std::runtime_error("ffmpeg stopped taking frames for " + path_);
   }
   void finish() {
-    if (gif_) {
-      gif_->close();
-      return;
-    }
     int rc = ::pclose(pipe_);
     pipe_ = nullptr;
     if (rc != 0) throw std::runtime_error("ffmpeg failed writing " + path_);
@@ -359,8 +373,6 @@ class VideoSink {
 
  private:
   std::string path_;
-  std::unique_ptr<GifWriter> gif_;
-  int factor_ = 1;
   std::FILE* pipe_ = nullptr;
 };
 
@@ -379,29 +391,25 @@ int run(const RenderOptions& opts) {
   std::vector<std::string> objects;
   std::vector<FrameFiles> frames = scan_frames(opts.dir, objects);
 
-  GraphColliders colliders;
   double fps = 24;
-  Graph graph;
-  if (!opts.graph.empty()) {
-    register_builtin_nodes();
-    graph = load_graph(opts.graph);
-    fps = graph.fps;
-    colliders.graph_file = opts.graph;
-    colliders.graph_name = graph.name;
-    for (const NodeDesc& node : graph.nodes) {
-      if (!node.info || node.info->role != NodeRole::Collider || !node.info->collider) continue;
-      std::string object;
-      for (int s : graph.solvers) {
-        auto it = graph.nodes[s].params.find("colliders");
-        if (it == graph.nodes[s].params.end()) continue;
-        for (const auto& name : it->second.list)
-          if (name == node.name && object.empty()) object = graph.nodes[s].name;
-      }
-      colliders.entries.push_back({&node, ParamSet(node.info->params, node.params), object});
-    }
+  // the graph is loaded (and checked) for its fps only; its node types are the program's
+  // (cli_main registers them)
+  if (!opts.graph.empty()) fps = load_graph(opts.graph).fps;
+  // --graph asks for the colliders: their poses must be there; without it a folder that has none
+  // (written before runs recorded them, or not by a run) is drawn without colliders, with a warning
+  RecordedColliders colliders = read_recorded_colliders(opts.dir, objects);
+  if (!colliders.missing.empty()) {
+    if (!opts.graph.empty())
+      throw BadInput("--graph " + opts.graph + ": the colliders are drawn from the poses the run "
+                     "recorded, and " + colliders.missing.front() + " does not exist (frames "
+                     "written before runs recorded collider poses, or not by `grains run`): run "
+                     "the graph again to draw them, or leave out --graph");
+    std::fprintf(stderr,
+                 "grains render: warning: %s does not exist (frames written before runs recorded "
+                 "collider poses, or not by `grains run`): its colliders are not drawn\n",
+                 colliders.missing.front().c_str());
   }
   if (opts.fps > 0) fps = opts.fps;
-  colliders.fps = fps;
 
   const std::string out = opts.out.empty() ? (fs::path(opts.dir) / "render").string() : opts.out;
   std::unique_ptr<VideoSink> video;
@@ -413,8 +421,7 @@ int run(const RenderOptions& opts) {
       throw BadInput("--video " + opts.video + ": the folder " + parent.string() +
                      " does not exist");
   }
-  if (!opts.video.empty() && lower(fs::path(opts.video).extension().string()) != ".gif" &&
-      find_on_path("ffmpeg").empty())
+  if (!opts.video.empty() && find_on_path("ffmpeg").empty())
     VideoSink(opts.video, W, H, fps);  // throws BadInput with the message
 
   // ---- pass 1: bounds and colour range over all frames ----
@@ -469,7 +476,7 @@ int run(const RenderOptions& opts) {
     const double st = f.number / fps;
     char caption[96];
     std::snprintf(caption, sizeof caption, "frame %d  t %.3f s  %zu grains", f.number, st, points);
-    Image img = render_frame(ptrs, cam, settings, colliders.at(st));
+    Image img = render_frame(ptrs, cam, settings, colliders.at(f.number));
     // thumbnails without the caption: the sheet labels them with their frame number
     if (next_pick < picks.size() && picks[next_pick] == static_cast<int>(k)) {
       thumbs.push_back(resize(img, layout.thumb_width, layout.thumb_height));
@@ -489,6 +496,14 @@ int run(const RenderOptions& opts) {
       std::fprintf(stderr, "\rrender: frame %d (%zu/%zu)   ", f.number, k + 1, frames.size());
   }
   if (!opts.quiet && isatty(fileno(stderr))) std::fputc('\n', stderr);
+  if (!colliders.frames_without.empty()) {
+    const size_t more = colliders.frames_without.size() - 1;
+    std::fprintf(stderr,
+                 "grains render: warning: %s has no collider poses for frame %d%s: drawn without "
+                 "colliders\n",
+                 kColliderPosesFile, colliders.frames_without.front(),
+                 more ? (" and " + std::to_string(more) + " more").c_str() : "");
+  }
   const std::string sheet_path = (fs::path(out) / "contact_sheet.png").string();
   write_png(sheet_path, contact_sheet(thumbs, thumb_numbers, W, H));
   if (video) video->finish();
@@ -540,12 +555,14 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
       ->required();
   r->add_option("--out", o.out, "output folder (default DIR/render)");
   r->add_option("--graph", o.graph,
-                "graph file: draws its colliders at each frame's time, uses its fps");
+                "graph file: uses its fps, and requires the collider poses its run recorded "
+                "(DIR/collider_poses.csv; they are drawn whenever present)");
   r->add_option("--color-by", o.color_by,
                 "attribute to colour by: v (speed), id, pscale, strain (edges), any float or int "
                 "attribute, a vector (its magnitude) or NAME.x/.y/.z; the range spans all frames");
   r->add_option("--video", o.video,
-                "also write a video: FILE.mp4 (needs ffmpeg) or FILE.gif (built in)");
+                "also write a video through ffmpeg: FILE.mp4, FILE.gif (one palette for the clip), "
+                "or anything ffmpeg writes");
   r->add_option("--camera", o.camera,
                 "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "
                 "(default: frames every grain of every frame)");

@@ -42,12 +42,7 @@ const std::set<std::pair<std::string, std::string>> kForbidden = {
 
 // Known exceptions (file, include). Each must still be needed: the test fails when one is
 // listed but the include is gone, so that the list never outlives its reason.
-const std::set<std::pair<std::string, std::string>> kKnownExceptions = {
-    // rule (a), the viewer never includes nodes/: render_command.cpp registers the node types to
-    // load a graph for its camera and colliders. The include is being removed on another branch;
-    // when that merges, this test fails until this line goes too.
-    {"viewer-offline/render_command.cpp", "nodes/register.h"},
-};
+const std::set<std::pair<std::string, std::string>> kKnownExceptions = {};
 
 struct Include {
   std::string file, target;  // relative to the source folder

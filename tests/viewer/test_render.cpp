@@ -1,9 +1,10 @@
 // The offline viewer: projection, z-buffered spheres, colour-by and its bar, edges, colliders,
-// the contact sheet, the render command's files and exit codes, the GIF writer.
+// the contact sheet, the render command's files, videos through ffmpeg and exit codes.
 #include <omp.h>
 #include <sys/wait.h>
 
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -11,9 +12,9 @@
 #include <fstream>
 #include <random>
 
+#include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
 #include "tests/support/support.h"
-#include "viewer-offline/gif.h"
 #include "viewer-offline/render.h"
 
 #pragma GCC diagnostic push
@@ -402,7 +403,7 @@ TEST_CASE("render command: a folder of 2 frames gives 2 PNGs and a contact sheet
   }
 }
 
-TEST_CASE("render command: colliders from a graph, the grains binary, exit codes", "[viewer]") {
+TEST_CASE("render command: colliders from the run, the grains binary, exit codes", "[viewer]") {
   std::string dir = two_frames();
   std::string graph = test::write_file(dir, "g.json", R"({
     "grains_graph": 1, "name": "r", "fps": 24, "frames": 2,
@@ -416,15 +417,17 @@ TEST_CASE("render command: colliders from a graph, the grains binary, exit codes
       {"name": "solver", "type": "solver", "inputs": ["src"], "params": {"colliders": ["ground", "ball", "box", "ring", "pill"]}}
     ]})");
   std::string log = dir + "/log.txt";
+  std::string sim = dir + "/sim";
   std::string out = dir + "/pictures";
-  CHECK(test::run_grains("render " + dir + " --graph " + graph + " --out " + out +
-                             " --size 96x64 --color-by strain --video " + dir + "/a.gif",
+  REQUIRE(test::run_grains("run " + graph + " --out " + sim + " --quiet", log) == 0);
+  CHECK(test::run_grains("render " + sim + " --graph " + graph + " --out " + out +
+                             " --size 96x64 --color-by v",
                          log) == 0);
   INFO(test::read_text(log));
+  CHECK(test::read_text(log).find("warning") == std::string::npos);
   CHECK(std::filesystem::exists(out + "/frame_0001.png"));
   CHECK(std::filesystem::exists(out + "/frame_0002.png"));
   CHECK(std::filesystem::exists(out + "/contact_sheet.png"));
-  CHECK(std::filesystem::exists(dir + "/a.gif"));
 
   SECTION("bad input exits 2 with a message") {
     CHECK(test::run_grains("render " + dir + "/missing", log) == 2);
@@ -444,6 +447,13 @@ TEST_CASE("render command: colliders from a graph, the grains binary, exit codes
     CHECK(WEXITSTATUS(rc) == 2);
     CHECK(test::read_text(log).find("ffmpeg") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(dir + "/a.mp4"));
+    // a GIF too: ffmpeg makes it
+    cmd = "PATH=" + empty + " " + std::string(GRAINS_BINARY) + " render " + dir +
+          " --size 32x24 --video " + dir + "/a.gif > " + log + " 2>&1";
+    rc = std::system(cmd.c_str());
+    CHECK(WEXITSTATUS(rc) == 2);
+    CHECK(test::read_text(log).find("needs ffmpeg on PATH") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir + "/a.gif"));
   }
   SECTION("with ffmpeg on PATH, raw RGB frames are piped to it") {
     // a stand-in ffmpeg that records its arguments and copies stdin into the output file
@@ -460,134 +470,150 @@ TEST_CASE("render command: colliders from a graph, the grains binary, exit codes
     CHECK(std::filesystem::file_size(dir + "/a.mp4") == 2u * 32 * 24 * 3);
     std::string args = test::read_text(bin + "/args");
     CHECK(args.find("-pix_fmt rgb24 -s 32x24 -framerate 12") != std::string::npos);
+    CHECK(args.find("-pix_fmt yuv420p") != std::string::npos);
+    // a GIF: one palette for the clip (palettegen, paletteuse), half size above 640 pixels
+    for (const std::string size : {"32x24", "642x24"}) {
+      const bool wide = size == "642x24";
+      cmd = "PATH=" + bin + ":$PATH " + std::string(GRAINS_BINARY) + " render " + dir +
+            " --size " + size + " --supersample 1 --video " + dir + "/a.gif > " + log + " 2>&1";
+      rc = std::system(cmd.c_str());
+      INFO(test::read_text(log));
+      CHECK(WEXITSTATUS(rc) == 0);
+      args = test::read_text(bin + "/args");
+      CHECK(args.find("-pix_fmt rgb24 -s " + size) != std::string::npos);
+      CHECK(args.find("split[a][b];[a]palettegen[p];[b][p]paletteuse") != std::string::npos);
+      CHECK((args.find("scale=iw/2:ih/2") != std::string::npos) == wide);
+      // the stand-in copies the raw frames: two at full size, ffmpeg scales
+      CHECK(std::filesystem::file_size(dir + "/a.gif") == 2u * 3 * 24 * (wide ? 642 : 32));
+    }
   }
 }
 
 namespace {
-// A GIF decoder just big enough to read back what GifWriter writes: the global palette and each
-// frame's indices.
-struct Gif {
-  int width = 0, height = 0;
-  std::vector<uint8_t> palette;
-  std::vector<std::vector<uint8_t>> frames;
-};
-bool decode_gif(const std::vector<uint8_t>& b, Gif& g) {
-  if (b.size() < 13 || std::string(b.begin(), b.begin() + 6) != "GIF89a") return false;
-  g.width = b[6] | b[7] << 8;
-  g.height = b[8] | b[9] << 8;
-  size_t k = 13;
-  if (b[10] & 0x80) {
-    size_t n = 3u << ((b[10] & 7) + 1);
-    g.palette.assign(b.begin() + k, b.begin() + k + n);
-    k += n;
-  }
-  while (k < b.size()) {
-    uint8_t tag = b[k++];
-    if (tag == 0x3B) return true;
-    if (tag == 0x21) {  // extension: label, sub-blocks
-      ++k;
-      while (b[k]) k += b[k] + 1;
-      ++k;
-      continue;
-    }
-    if (tag != 0x2C) return false;
-    k += 9;
-    int min_size = b[k++];
-    std::vector<uint8_t> data;
-    while (b[k]) {
-      data.insert(data.end(), b.begin() + k + 1, b.begin() + k + 1 + b[k]);
-      k += b[k] + 1;
-    }
-    ++k;
-    // LZW decode
-    const int clear = 1 << min_size, end = clear + 1;
-    std::vector<std::vector<uint8_t>> dict;
-    auto reset = [&] {
-      dict.clear();
-      for (int c = 0; c < clear + 2; ++c) dict.push_back({static_cast<uint8_t>(c)});
-    };
-    reset();
-    int size = min_size + 1, prev = -1;
-    size_t bitpos = 0;
-    std::vector<uint8_t> out;
-    for (;;) {
-      if ((bitpos + size + 7) / 8 > data.size()) return false;
-      int code = 0;
-      for (int i = 0; i < size; ++i, ++bitpos)
-        code |= ((data[bitpos / 8] >> (bitpos % 8)) & 1) << i;
-      if (code == clear) {
-        reset();
-        size = min_size + 1;
-        prev = -1;
-        continue;
-      }
-      if (code == end) break;
-      std::vector<uint8_t> entry;
-      if (code < static_cast<int>(dict.size())) {
-        entry = dict[code];
-        if (prev >= 0) {
-          auto e = dict[prev];
-          e.push_back(entry[0]);
-          dict.push_back(e);
-        }
-      } else {
-        if (prev < 0 || code != static_cast<int>(dict.size())) return false;
-        entry = dict[prev];
-        entry.push_back(entry[0]);
-        dict.push_back(entry);
-      }
-      out.insert(out.end(), entry.begin(), entry.end());
-      prev = code;
-      if (static_cast<int>(dict.size()) == (1 << size) && size < 12) ++size;
-    }
-    g.frames.push_back(out);
-  }
-  return false;
+// Two solvers share a ball placed by the object's own variables: at x = 0.5 $OBJID - 0.25 and
+// y = 0.3 + 0.1 $NOBJ + $ST, so each solver meets it somewhere else (OBJID 0 and 1, NOBJ 2);
+// solver a also has a box. No plane: a plane's ground patch is sized by the grains' bounds.
+const char* kPerObjectGraph = R"({
+  "grains_graph": 1, "name": "objects", "fps": 24, "frames": 2,
+  "nodes": [
+    {"name": "sa", "type": "source", "params": {"shape": "box", "center": [-0.25, 0.1, 0], "size": [0.1, 0.1, 0.1], "separation": 0.05}},
+    {"name": "sb", "type": "source", "params": {"shape": "box", "center": [0.25, 0.1, 0], "size": [0.1, 0.1, 0.1], "separation": 0.05}},
+    {"name": "ball", "type": "collider", "params": {"shape": "sphere", "radius": 0.12,
+      "translate": ["0.5 * $OBJID - 0.25", "0.3 + 0.1 * $NOBJ + $ST", 0]}},
+    {"name": "box", "type": "collider", "params": {"shape": "box", "size": [0.2, 0.05, 0.2], "translate": [0, -0.1, 0], "rotate": [0, 30, 0]}},
+    {"name": "a", "type": "solver", "inputs": ["sa"], "params": {"colliders": ["box", "ball"]}},
+    {"name": "b", "type": "solver", "inputs": ["sb"], "params": {"colliders": ["ball"]}}
+  ]})";
+
+bool same_pose(const ColliderState& a, const ColliderState& b) {
+  bool same = a.name == b.name && a.shape.kind == b.shape.kind && a.shape.radius == b.shape.radius &&
+              a.pose.t.x == b.pose.t.x && a.pose.t.y == b.pose.t.y && a.pose.t.z == b.pose.t.z &&
+              a.pose.s == b.pose.s;
+  for (int k = 0; k < 9; ++k) same = same && a.pose.R[k] == b.pose.R[k];
+  return same;
 }
 }  // namespace
 
-TEST_CASE("GIF writer: palette colours round-trip through LZW", "[viewer]") {
-  std::string dir = test::temp_dir("gif");
-  const auto& pal = gif_palette();
-  REQUIRE(pal.size() == 768);
-  // frames of palette colours (noise, so the code table fills and clears many times)
-  std::mt19937 rng(5);
-  std::vector<Image> frames;
-  for (int f = 0; f < 2; ++f) {
-    Image img(150, 97);
-    for (int y = 0; y < img.height; ++y)
-      for (int x = 0; x < img.width; ++x) {
-        int c = (f == 0) ? static_cast<int>(rng() % 252) : (x / 10 + y / 7) % 252;
-        uint8_t* p = img.px(x, y);
-        p[0] = pal[3 * c];
-        p[1] = pal[3 * c + 1];
-        p[2] = pal[3 * c + 2];
+TEST_CASE("render command: a collider placed by $OBJID and $NOBJ is drawn where it was simulated",
+          "[viewer]") {
+  const std::string dir = test::temp_dir("render_objects");
+  const std::string graph = test::write_file(dir, "g.json", kPerObjectGraph);
+  const std::string sim = dir + "/sim", log = dir + "/log.txt";
+  REQUIRE(test::run_grains("run " + graph + " --out " + sim + " --quiet", log) == 0);
+
+  // the poses the run wrote are the ones the simulation used, bit for bit
+  Simulation s(test::graph_from(kPerObjectGraph), 1);
+  std::vector<std::vector<ColliderState>> used(3);  // frame -> every object's colliders
+  for (int f = 1; f <= 2; ++f) {
+    s.step_frame();
+    for (size_t k = 0; k < s.object_count(); ++k) {
+      const SimObject& o = s.object(k);
+      const auto written = read_collider_poses(sim + "/" + o.name + "/" + kColliderPosesFile);
+      REQUIRE(written.count(f));
+      REQUIRE(written.at(f).size() == o.colliders.size());
+      for (size_t c = 0; c < o.colliders.size(); ++c) {
+        INFO("frame " << f << ", solver " << o.name << ", collider " << o.colliders[c].name);
+        CHECK(same_pose(written.at(f)[c], o.colliders[c]));
       }
-    frames.push_back(img);
+      used[f].insert(used[f].end(), o.colliders.begin(), o.colliders.end());
+    }
   }
-  {
-    GifWriter w(dir + "/t.gif", 150, 97, 4);
-    for (const auto& f : frames) w.add_frame(f);
+  // solver b met the ball at OBJID 1, NOBJ 2
+  const ColliderState& ball_b = used[2].back();
+  REQUIRE(ball_b.name == "ball");
+  CHECK(ball_b.pose.t.x == Approx(0.25));
+  CHECK(ball_b.pose.t.y == Approx(0.5 + 2 / 24.0));
+
+  // the rendered frame is the one drawn from the simulation's own poses
+  RenderOptions o;
+  o.dir = sim;
+  o.out = dir + "/pictures";
+  o.size = "96x64";
+  o.supersample = 1;
+  o.quiet = true;
+  o.camera = "0,0.3,2.5,0,0.3,0,40";
+  REQUIRE(render_command(o) == 0);
+  const Camera cam = Camera::look_at({0, 0.3f, 2.5f}, {0, 0.3f, 0}, 40, 96, 64);
+  RenderSettings settings;
+  settings.supersample = 1;
+  ParticleStore pa = read_ply(sim + "/a/frame_0002.ply"), pb = read_ply(sim + "/b/frame_0002.ply");
+  Image expected = render_frame({&pa, &pb}, cam, settings, used[2]);
+  char caption[96];
+  std::snprintf(caption, sizeof caption, "frame %d  t %.3f s  %zu grains", 2, 2 / 24.0,
+                pa.size() + pb.size());
+  draw_caption(expected, caption);
+  int w = 0, h = 0, n = 0;
+  unsigned char* data = stbi_load((o.out + "/frame_0002.png").c_str(), &w, &h, &n, 3);
+  REQUIRE(data);
+  REQUIRE(w == 96);
+  REQUIRE(h == 64);
+  const bool same = std::equal(expected.rgb.begin(), expected.rgb.end(), data);
+  stbi_image_free(data);
+  CHECK(same);
+  // and not the one a viewer evaluating the graph for itself drew (OBJID 0, NOBJ 1 for every
+  // object): there, solver b's ball was missing
+  std::vector<ColliderState> object_a_only(used[2].begin(), used[2].begin() + 2);
+  Image wrong = render_frame({&pa, &pb}, cam, settings, object_a_only);
+  draw_caption(wrong, caption);
+  CHECK_FALSE(wrong.rgb == expected.rgb);
+}
+
+TEST_CASE("render command: a missing or damaged collider_poses.csv warns or is refused, no crash",
+          "[viewer]") {
+  const std::string dir = test::temp_dir("render_poses");
+  const std::string graph = test::write_file(dir, "g.json", kPerObjectGraph);
+  const std::string sim = dir + "/sim", log = dir + "/log.txt", pics = " --out " + dir + "/p";
+  REQUIRE(test::run_grains("run " + graph + " --out " + sim + " --quiet", log) == 0);
+  const std::string poses_b = sim + "/b/" + kColliderPosesFile;
+  const std::string text_b = test::read_text(poses_b);
+
+  SECTION("missing: drawn without that solver's colliders and a warning; refused with --graph") {
+    std::filesystem::remove(poses_b);
+    CHECK(test::run_grains("render " + sim + pics + " --size 32x24 --quiet", log) == 0);
+    CHECK_THAT(test::read_text(log),
+               Catch::Contains("grains render: warning: " + poses_b + " does not exist") &&
+                   Catch::Contains("its colliders are not drawn"));
+    CHECK(std::filesystem::exists(dir + "/p/frame_0002.png"));
+    CHECK(test::run_grains("render " + sim + pics + " --size 32x24 --graph " + graph, log) == 2);
+    CHECK_THAT(test::read_text(log), Catch::Contains("grains render: error: --graph " + graph) &&
+                                         Catch::Contains(poses_b + " does not exist"));
   }
-  std::ifstream in(dir + "/t.gif", std::ios::binary);
-  std::vector<uint8_t> bytes_((std::istreambuf_iterator<char>(in)),
-                              std::istreambuf_iterator<char>());
-  Gif g;
-  REQUIRE(decode_gif(bytes_, g));
-  CHECK(g.width == 150);
-  CHECK(g.height == 97);
-  REQUIRE(g.frames.size() == 2);
-  for (int f = 0; f < 2; ++f) {
-    REQUIRE(g.frames[f].size() == 150u * 97u);
-    bool same = true;
-    for (int y = 0; y < 97; ++y)
-      for (int x = 0; x < 150; ++x) {
-        int i = g.frames[f][y * 150 + x];
-        const uint8_t* p = frames[f].px(x, y);
-        same = same && g.palette[3 * i] == p[0] && g.palette[3 * i + 1] == p[1] &&
-               g.palette[3 * i + 2] == p[2];
-      }
-    CHECK(same);
+  SECTION("a frame without rows: drawn without colliders and a warning") {
+    test::write_file(sim + "/b", kColliderPosesFile, text_b.substr(0, text_b.rfind("\n2,") + 1));
+    CHECK(test::run_grains("render " + sim + pics + " --size 32x24 --quiet", log) == 0);
+    CHECK_THAT(test::read_text(log), Catch::Contains("grains render: warning: " +
+                                                     std::string(kColliderPosesFile) +
+                                                     " has no collider poses for frame 2"));
+  }
+  SECTION("damaged: refused with the file, the line and what is wrong") {
+    for (const std::string& bad :
+         {text_b + "3,0.125,ball,sphere,nan\n", text_b.substr(0, text_b.size() / 2),
+          std::string("\x01\x02 not text at all"), std::string()}) {
+      test::write_file(sim + "/b", kColliderPosesFile, bad);
+      INFO(bad);
+      CHECK(test::run_grains("render " + sim + pics + " --size 32x24 --quiet", log) == 2);
+      CHECK_THAT(test::read_text(log), Catch::Contains("grains render: error: " + poses_b + ":"));
+    }
   }
 }
 

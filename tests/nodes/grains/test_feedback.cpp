@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/frame_writer.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/support.h"
 
@@ -58,7 +59,7 @@ TEST_CASE("collision feedback: a resting pile presses on the ground with its wei
   for (int f = 1; f <= 48; ++f) {
     sim.step_frame();
     const FrameStats& st = sim.object(0).stats;
-    w.write(f, sim.object(0).pts, st, false);
+    w.write(frame_output(f, sim.object(0), false));
     REQUIRE(st.colliders.size() == 1);
     if (f <= 36) continue;  // settled after 1.5 s
     sum_fy += st.colliders[0].force.y;

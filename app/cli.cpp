@@ -13,6 +13,7 @@
 #include <iostream>
 
 #include "cli/options.h"
+#include "cli/program.h"
 #include "engine/collider_poses.h"
 #include "engine/cook.h"
 #include "engine/dem_measures.h"
@@ -28,8 +29,6 @@
 namespace grains {
 namespace {
 
-constexpr int kBadInput = 2;
-constexpr int kRunFailure = 1;
 
 std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
   std::vector<Override> out;
@@ -337,15 +336,9 @@ int cli_main(int argc, char** argv) {
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
 
-  try {
-    app.parse(argc, argv);
-    check_float_options(app);
-  } catch (const CLI::ParseError& e) {
-    int rc = app.exit(e);
-    return rc == 0 ? 0 : kBadInput;
-  }
+  if (const int rc = parse_command_line(app, argc, argv); rc >= 0) return rc;
 
-  try {
+  return report_errors("grains", [&]() -> int {
     if (run->parsed()) {
       if (opencl) {
         std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
@@ -372,20 +365,8 @@ int cli_main(int argc, char** argv) {
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
                       threads, cook_out, overwrite);
-  } catch (const LoadError& e) {
-    std::fprintf(stderr, "grains: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const GeometryError& e) {
-    std::fprintf(stderr, "grains: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const BudgetError& e) {
-    std::fprintf(stderr, "grains: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const std::exception& e) {  // a non-finite state, a WriteError (disk full), ...
-    std::fprintf(stderr, "grains: failed: %s\n", e.what());
-    return kRunFailure;
-  }
-  return 0;
+    return 0;
+  });
 }
 
 }  // namespace grains

@@ -9,6 +9,7 @@
 #include <cstdio>
 
 #include "cli/options.h"
+#include "cli/program.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
 #include "engine/node.h"
@@ -18,9 +19,6 @@
 #include "nodes/register.h"
 
 namespace {
-
-constexpr int kBadInput = 2;
-constexpr int kRunFailure = 1;
 
 int lab_main(int argc, char** argv) {
   using namespace grains;
@@ -35,32 +33,14 @@ int lab_main(int argc, char** argv) {
   ValidationOptions laws_opts;
   auto* laws = add_validation_command(app, laws_opts, argc, argv);
 
-  try {
-    app.parse(argc, argv);
-    check_float_options(app);
-  } catch (const CLI::ParseError& e) {
-    int rc = app.exit(e);
-    return rc == 0 ? 0 : kBadInput;
-  }
+  if (const int rc = parse_command_line(app, argc, argv); rc >= 0) return rc;
 
-  try {
+  return report_errors("grains-lab", [&]() -> int {
     if (bench->parsed()) return run_bench(bench_opts);
     if (features->parsed()) return run_feature_bench(features_opts);
     if (laws->parsed()) return run_validation(laws_opts);
-  } catch (const LoadError& e) {
-    std::fprintf(stderr, "grains-lab: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const GeometryError& e) {
-    std::fprintf(stderr, "grains-lab: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const BudgetError& e) {
-    std::fprintf(stderr, "grains-lab: error: %s\n", e.what());
-    return kBadInput;
-  } catch (const std::exception& e) {  // a non-finite state, a failed write, ...
-    std::fprintf(stderr, "grains-lab: failed: %s\n", e.what());
-    return kRunFailure;
-  }
-  return 0;
+    return 0;
+  });
 }
 
 }  // namespace

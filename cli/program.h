@@ -1,0 +1,50 @@
+// What the grains and grains-lab programs share around their subcommands: the exit codes, the
+// parse of the command line, and the mapping of an error to its exit code and message.
+#pragma once
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <exception>
+
+#include "cli/options.h"
+#include "engine/geometry_io.h"
+#include "engine/graph.h"
+#include "engine/node.h"
+
+namespace grains {
+
+constexpr int kBadInput = 2;    // the graph, a parameter, a file or an option is wrong
+constexpr int kRunFailure = 1;  // a failure while running (a non-finite state, a failed write)
+
+// Parses the command line and checks its floating-point options. Returns -1 when a subcommand is
+// to run, else the exit code: 0 after --help, kBadInput for a bad command line.
+inline int parse_command_line(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+    check_float_options(app);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : kBadInput;
+  }
+  return -1;
+}
+
+// Runs a subcommand; an error it throws becomes its exit code, with "PROGRAM: error: ..." for
+// bad input and "PROGRAM: failed: ..." for a failure while running.
+template <class Body>
+int report_errors(const char* program, Body&& body) {
+  try {
+    return body();
+  } catch (const LoadError& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+  } catch (const GeometryError& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+  } catch (const BudgetError& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+  } catch (const std::exception& e) {  // a non-finite state, a WriteError (disk full), ...
+    std::fprintf(stderr, "%s: failed: %s\n", program, e.what());
+    return kRunFailure;
+  }
+  return kBadInput;
+}
+
+}  // namespace grains

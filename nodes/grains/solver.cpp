@@ -978,7 +978,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 
   if (history)
-    save_history(d, s, g.P, p_.data(), pair_friction_pass, collider_friction_pass, threads);
+    save_history(d, s, g, prm, p_.data(), pair_friction_pass, collider_friction_pass, threads);
   else
     hist_id_.clear(), hist_slip_.clear();
 
@@ -1106,16 +1106,14 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
   }
 }
 
-void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const float* P,
-                                const float* p, bool pairs, bool planes, int threads) {
+void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
+                                const gr_params& prm, const float* p, bool pairs, bool planes,
+                                int threads) {
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
   const float dt = s.dt;
-  // A stuck contact remembers at most this much slip, as a DEM contact's tangential spring
-  // saturates at mu F_n / k_t (a fraction of its normal overlap): kHistoryReach x the static
-  // coefficient x the summed radii. Slip beyond it is sliding, forgotten.
-  const float mu_pairs = kHistoryReach * s.friction_with_particles * s.static_threshold;
-  const float mu_planes = kHistoryReach * s.friction_with_colliders * s.static_threshold;
+  const float* P = g.P;
+  // what a stuck contact remembers at most: gr_pair_history_cap, gr_plane_history_cap
   auto capped = [](gr_float3 h, float cap) {
     const float l = gr_length(h);
     return l > cap ? gr_scale(h, cap / l) : h;
@@ -1147,7 +1145,6 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
     const int ii = static_cast<int>(i);
     const gr_float3 pi = gr_load3(p, ii);
     const gr_float3 di = gr_sub(pi, gr_load3(P, ii));
-    const float mu_i = d.friction ? d.friction[i] : 1.0f;
     if (pairs)
       for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
         const int j = static_cast<int>(neighbors_.indices[k]);
@@ -1158,7 +1155,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
                                       gr_load3(pair_slip_.data(), static_cast<int>(k)));
           const gr_float3 xij = gr_sub(pi, pj);
           const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), ii, j);
-          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), mu_pairs * mu_i * (radius_[i] + radius_[j]));
+          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_pair_history_cap(&g, &prm, ii, j));
         }
         gr_store3(hist_slip_.data(), static_cast<int>(k), h);
       }
@@ -1172,7 +1169,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
       dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
       hist_plane_collider_[m] = plane_collider_[e];
       gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
-                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), mu_planes * mu_i * 2 * radius_[i]));
+                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_plane_history_cap(&g, &prm, ii)));
       ++m;
     }
   }

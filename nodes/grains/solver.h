@@ -13,6 +13,7 @@
 
 #include "engine/collider.h"
 #include "engine/neighbors.h"
+#include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
 
 namespace grains {
 
@@ -136,8 +137,8 @@ class GrainsSolver {
   // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
   // pulling back to where it stuck until it slides
   void load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows, int threads);
-  void save_history(const GrainsData& d, const GrainsSettings& s, const float* P, const float* p,
-                    bool pairs, bool planes, int threads);
+  void save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
+                    const gr_params& prm, const float* p, bool pairs, bool planes, int threads);
   int32_t previous_index(int32_t id) const;
 
   // Verlet reuse of the neighbour rows across substeps (substep(): keep_rows)
@@ -173,7 +174,6 @@ class GrainsSolver {
   static constexpr int kStabilizeIterations = 64;  // and at most constraint_iterations
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
-  static constexpr float kHistoryReach = 0.01f;  // see save_history
   // the history saved at the end of the last substep, by grain in that substep's order: the id
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once
   // they are rebuilt), and per grain a row of (collider, slip)

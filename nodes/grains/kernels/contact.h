@@ -260,15 +260,14 @@ GR_INLINE void gr_gather_pair_slip(const gr_grains* g, const gr_params* prm,
 
 /* Contact history (GrainsSolver::save_history): a stuck contact remembers at most this much slip,
  * as a DEM contact's tangential spring saturates at mu F_n / k_t (a fraction of its normal
- * overlap): GR_HISTORY_REACH x the static coefficient x the summed radii. Slip beyond it is
+ * overlap): contact_memory x the static coefficient x the summed radii. Slip beyond it is
  * sliding, forgotten. */
-#define GR_HISTORY_REACH 0.01f
 GR_INLINE float gr_pair_history_cap(const gr_grains* g, const gr_params* prm, int i, int j) {
-  const float mu = GR_HISTORY_REACH * prm->friction_with_particles * prm->static_threshold;
+  const float mu = prm->contact_memory * prm->friction_with_particles * prm->static_threshold;
   return mu * gr_attr(g->friction, i) * (g->radius[i] + g->radius[j]);
 }
 GR_INLINE float gr_plane_history_cap(const gr_grains* g, const gr_params* prm, int i) {
-  const float mu = GR_HISTORY_REACH * prm->friction_with_colliders * prm->static_threshold;
+  const float mu = prm->contact_memory * prm->friction_with_colliders * prm->static_threshold;
   return mu * gr_attr(g->friction, i) * 2 * g->radius[i];
 }
 

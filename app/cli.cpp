@@ -336,7 +336,7 @@ int cli_main(int argc, char** argv) {
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
 
-  if (const int rc = parse_command_line(app, argc, argv); rc >= 0) return rc;
+  if (const int rc = parse_command_line("grains", app, argc, argv); rc >= 0) return rc;
 
   return report_errors("grains", [&]() -> int {
     if (run->parsed()) {

@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include "cli/options.h"
 #include "engine/geometry_io.h"
@@ -15,9 +16,24 @@ namespace grains {
 constexpr int kBadInput = 2;    // the graph, a parameter, a file or an option is wrong
 constexpr int kRunFailure = 1;  // a failure while running (a non-finite state, a failed write)
 
-// Parses the command line and checks its floating-point options. Returns -1 when a subcommand is
+// Parses the command line of `program` and checks its floating-point options. Returns -1 when a subcommand is
 // to run, else the exit code: 0 after --help, kBadInput for a bad command line.
-inline int parse_command_line(CLI::App& app, int argc, char** argv) {
+inline int parse_command_line(const char* program, CLI::App& app, int argc, char** argv) {
+  // a first word that names no subcommand: say so and list them (CLI11 would say only that a
+  // subcommand is required)
+  if (argc > 1 && argv[1][0] != '-') {
+    std::string names;
+    bool known = false;
+    for (const CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+      known = known || sub->check_name(argv[1]);
+      names += (names.empty() ? "" : ", ") + sub->get_name();
+    }
+    if (!known) {
+      std::fprintf(stderr, "%s: unknown command '%s' (commands: %s; --help for more)\n", program,
+                   argv[1], names.c_str());
+      return kBadInput;
+    }
+  }
   try {
     app.parse(argc, argv);
     check_float_options(app);

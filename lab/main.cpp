@@ -33,7 +33,7 @@ int lab_main(int argc, char** argv) {
   ValidationOptions laws_opts;
   auto* laws = add_validation_command(app, laws_opts, argc, argv);
 
-  if (const int rc = parse_command_line(app, argc, argv); rc >= 0) return rc;
+  if (const int rc = parse_command_line("grains-lab", app, argc, argv); rc >= 0) return rc;
 
   return report_errors("grains-lab", [&]() -> int {
     if (bench->parsed()) return run_bench(bench_opts);

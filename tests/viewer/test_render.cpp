@@ -618,7 +618,8 @@ TEST_CASE("render command: a missing or damaged collider_poses.csv warns or is r
 }
 
 TEST_CASE("render time for 100,000 grains", "[.][viewer][bench]") {
-  // hidden (run with "[bench]"): a settled-looking pile of 100k grains at 960x540
+  // hidden (run with "[bench]"): a settled-looking pile of 100k grains at 960x540; reports the
+  // time, asserts none (speed lives in benchmarks)
   std::mt19937 rng(1);
   std::uniform_real_distribution<float> u(0, 1);
   std::vector<Vec3> c;
@@ -653,6 +654,5 @@ TEST_CASE("render time for 100,000 grains", "[.][viewer][bench]") {
     double png_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count();
     WARN("  PNG write: " << png_ms << " ms");
-    CHECK(ms < 1000);
   }
 }

@@ -26,7 +26,7 @@ void register_collider_node() {
       ParamDecl::Float("friction", 0.5, "Coulomb friction of the solver's response (non-grains points)").at_least(0),
   };
   t.collider = [](const ParamSet& p, ColliderState& c) {
-    parse_shape(p.s("shape"), c.shape.kind);
+    c.shape.kind = static_cast<ShapeKind>(p.choice("shape"));  // the menu is in ShapeKind's order
     c.shape.size = p.v3("size");
     c.shape.radius = static_cast<float>(p.f("radius"));
     c.shape.tube = static_cast<float>(p.f("tube"));

@@ -1,5 +1,5 @@
 // The dependency direction of DESIGN §1 and STYLE.md, read from the sources' #include lines:
-// engine/ ← nodes/ ← the programs. The product (`grains`, app/) and the lab (`grains-lab`, lab/)
+// engine/ ← nodes/ ← the programs, and engine/ ← cli/ ← the programs. The product (`grains`, app/) and the lab (`grains-lab`, lab/)
 // share only the engine, the nodes, the option checks (cli/) and the image module
 // (viewer-offline/image.h); neither includes the other, and the viewer includes neither.
 #include <algorithm>
@@ -26,7 +26,7 @@ const std::vector<std::string> kFolders = {"engine",         "nodes", "cli",
 const std::map<std::string, std::vector<std::string>> kMayInclude = {
     {"engine", {"engine/"}},
     {"nodes", {"engine/", "nodes/"}},
-    {"cli", {"cli/"}},
+    {"cli", {"engine/", "cli/"}},  // program.h maps the engine's errors to exit codes
     {"viewer-offline", {"engine/", "cli/", "viewer-offline/"}},
     {"app", {"engine/", "nodes/", "cli/", "viewer-offline/", "app/"}},
     {"lab", {"engine/", "nodes/", "cli/", "viewer-offline/image.h", "lab/"}},

@@ -11,9 +11,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include "cli/options.h"
 #include "cli/program.h"
+#include "engine/checkpoint.h"
 #include "engine/collider_poses.h"
 #include "engine/cook.h"
 #include "engine/dem_measures.h"
@@ -51,7 +53,7 @@ bool run_owns(const std::filesystem::path& p) {
   const std::string name = p.filename().string();
   const std::string stem =
       name.size() > 4 && name.ends_with(".tmp") ? name.substr(0, name.size() - 4) : name;
-  return stem == "stats.csv" || stem == kColliderPosesFile ||
+  return stem == "stats.csv" || stem == kColliderPosesFile || stem == kCheckpointFile ||
          (stem.starts_with("frame_") && stem.ends_with(".ply"));
 }
 
@@ -113,38 +115,109 @@ void say_precision(const SimObject& o, bool quiet, int& said) {
   said = coarse ? 2 : 1;
 }
 
-int cmd_run(const std::string& path, const std::string& out_override, int frames_override,
-            int threads, const std::vector<std::string>& sets, bool quiet, bool overwrite,
-            size_t max_points) {
-  Graph g = load_graph(path, parse_overrides(sets));
-  if (frames_override > 0) g.frames = frames_override;
-  std::string out = out_override.empty() ? g.output.dir : out_override;
-  Simulation sim(g, threads);
-  sim.set_max_points(max_points);
+// What `grains run` was asked for on its command line.
+struct RunRequest {
+  std::string graph, out;
+  int frames = 0;  // 0: the graph's
+  int threads = 0;
+  std::vector<std::string> sets;
+  bool quiet = false, overwrite = false;
+  size_t max_points = kDefaultMaxPoints;
+  bool max_points_given = false;
+  int checkpoint_every = 0;  // frames between checkpoints (0: none)
+  std::string resume;        // the folder of a run to continue
+};
+
+// A run to resume: the checkpoint of its folder, checked against what the command line adds
+// (the run continues with the graph, overrides and budget it was started with; --frames may
+// lengthen it, --threads and --checkpoint-every may change).
+Checkpoint resumed_run(RunRequest& req) {
+  Checkpoint ck(req.resume);
+  const RunRecord& rec = ck.record();
+  auto refuse = [&](const std::string& what) {
+    throw LoadError(req.resume, "", what + ": a resumed run continues as it was started (" +
+                                        rec.graph + ")");
+  };
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!req.graph.empty() && fs::weakly_canonical(req.graph, ec) != fs::path(rec.graph))
+    refuse("the checkpoint is of another graph than " + req.graph);
+  if (!req.sets.empty()) refuse("--set cannot change it");
+  if (!req.out.empty()) refuse("--out cannot move it");
+  if (req.overwrite) refuse("--overwrite would remove what it continues");
+  if (file_hash(rec.graph) != rec.graph_hash)
+    throw LoadError(rec.graph, "",
+                    "the graph has changed since the checkpoint in " + req.resume +
+                        " was written; a resumed run needs the graph it was started with");
+  req.graph = rec.graph;
+  req.sets = rec.sets;
+  req.out = req.resume;
+  if (!req.max_points_given) req.max_points = rec.max_points;
+  if (req.frames == 0) req.frames = rec.frames;
+  if (req.frames < ck.frame())
+    throw LoadError(req.resume, "",
+                    "the checkpoint is at frame " + std::to_string(ck.frame()) +
+                        ", past the " + std::to_string(req.frames) + " frames asked for");
+  if (req.checkpoint_every == 0) req.checkpoint_every = rec.checkpoint_every;
+  return ck;
+}
+
+int cmd_run(RunRequest req) {
+  std::optional<Checkpoint> resume;
+  if (!req.resume.empty()) resume.emplace(resumed_run(req));
+  if (req.graph.empty()) throw LoadError("grains run", "", "name a graph file, or --resume DIR");
+  Graph g = load_graph(req.graph, parse_overrides(req.sets));
+  if (req.frames > 0) g.frames = req.frames;
+  const std::string out = req.out.empty() ? g.output.dir : req.out;
+  const bool quiet = req.quiet;
+  Simulation sim(g, req.threads);
+  sim.set_max_points(req.max_points);
   std::vector<std::string> dirs;
   for (size_t k = 0; k < sim.object_count(); ++k)
     dirs.push_back(sim.object_count() == 1 ? out : out + "/" + sim.object(k).name);
-  // the solvers' folders inside `out` are the run's own; anything else there counts
-  if (sim.object_count() > 1) {
+  std::vector<std::unique_ptr<FrameSink>> sinks;
+  int first = 1;
+  if (resume) {
+    resume->restore(sim);
+    first = sim.frame() + 1;
+    for (const std::string& dir : dirs)
+      sinks.push_back(std::make_unique<FrameWriter>(
+          FrameWriter::continuing(dir, g.output.attributes, sim.frame())));
+  } else {
+    const std::string checkpoint = out + "/" + kCheckpointFile;
+    // the solvers' folders inside `out` and its checkpoint are the run's own; anything else
+    // there counts
     namespace fs = std::filesystem;
     std::error_code ec;
-    if (fs::is_directory(out, ec) && !overwrite)
+    if (sim.object_count() > 1 && fs::is_directory(out, ec) && !req.overwrite)
       for (const auto& e : fs::directory_iterator(out, ec))
         if (std::find(dirs.begin(), dirs.end(), (fs::path(out) / e.path().filename()).string()) ==
             dirs.end())
           throw used_folder(out, e.path().filename().string());
+    std::vector<std::string> inputs;  // files the nodes read
+    for (const NodeDesc& d : g.nodes)
+      if (auto it = d.params.find("file"); it != d.params.end() && !it->second.text.empty())
+        inputs.push_back(resolve_path(g.base_dir, it->second.text));
+    prepare_output(dirs, req.overwrite, inputs);
+    if (req.overwrite && sim.object_count() > 1) {
+      fs::remove(checkpoint, ec);
+      fs::remove(checkpoint + ".tmp", ec);
+    }
+    for (const std::string& dir : dirs)
+      sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
   }
-  std::vector<std::string> inputs;  // files the nodes read
-  for (const NodeDesc& d : g.nodes)
-    if (auto it = d.params.find("file"); it != d.params.end() && !it->second.text.empty())
-      inputs.push_back(resolve_path(g.base_dir, it->second.text));
-  prepare_output(dirs, overwrite, inputs);
-  std::vector<std::unique_ptr<FrameSink>> sinks;
-  for (const std::string& dir : dirs)
-    sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+  RunRecord record;
+  if (req.checkpoint_every > 0) {
+    record.graph = std::filesystem::weakly_canonical(req.graph).string();
+    record.graph_hash = file_hash(record.graph);
+    record.sets = req.sets;
+    record.frames = g.frames;
+    record.checkpoint_every = req.checkpoint_every;
+    record.max_points = req.max_points;
+  }
   bool tty = isatty(fileno(stderr)) && !quiet;
   std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
-  for (int f = 1; f <= g.frames; ++f) {
+  for (int f = first; f <= g.frames; ++f) {
     sim.step_frame();
     size_t points = 0;
     double ms = 0;
@@ -155,6 +228,9 @@ int cmd_run(const std::string& path, const std::string& out_override, int frames
       points += o.pts.size();
       ms += o.stats.wall_ms;
     }
+    // after the frame's files: a checkpoint never runs ahead of the frames it resumes after
+    if (req.checkpoint_every > 0 && (f % req.checkpoint_every == 0 || f == g.frames))
+      write_checkpoint(out, record, sim);
     if (tty)
       progress(f, g.frames, ms, points);
     else if (!quiet)
@@ -284,7 +360,8 @@ int cli_main(int argc, char** argv) {
   std::vector<std::string> sets;
 
   auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
-  run->add_option("graph", graph_path, "graph file (JSON)")->required();
+  RunRequest req;
+  run->add_option("graph", graph_path, "graph file (JSON); none with --resume");
   run->add_option("--out", out, "output folder (default: the graph's output.dir)");
   run->add_option("--frames", frames, "number of frames (default: the graph's)")
       ->check(positive_number());
@@ -293,12 +370,18 @@ int cli_main(int argc, char** argv) {
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
   run->add_flag("--quiet", quiet, "print nothing but errors");
-  run->add_option("--max-points", max_points,
+  auto* max_points_opt = run->add_option("--max-points", max_points,
                   "the most points the run may hold (default 20000000, about 12 GB)")
       ->check(positive_number());
   run->add_flag("--overwrite", overwrite,
-                "replace the frames, stats.csv and collider_poses.csv an earlier run left in "
-                "the output folder");
+                "replace the frames, stats.csv, collider_poses.csv and checkpoint an earlier "
+                "run left in the output folder");
+  run->add_option("--checkpoint-every", req.checkpoint_every,
+                  "write the run's state to OUT/checkpoint.grains every N frames and at the end")
+      ->check(positive_number());
+  run->add_option("--resume", req.resume,
+                  "continue the run whose output folder this is from its checkpoint (frames "
+                  "after it are made again, bit for bit)");
 
   auto* validate = app.add_subcommand("validate", "load and check a graph without running it");
   validate->add_option("graph", graph_path, "graph file (JSON)")->required();
@@ -344,7 +427,16 @@ int cli_main(int argc, char** argv) {
         std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
         return kBadInput;
       }
-      return cmd_run(graph_path, out, frames, threads, sets, quiet, overwrite, max_points);
+      req.graph = graph_path;
+      req.out = out;
+      req.frames = frames;
+      req.threads = threads;
+      req.sets = sets;
+      req.quiet = quiet;
+      req.overwrite = overwrite;
+      req.max_points = max_points;
+      req.max_points_given = max_points_opt->count() > 0;
+      return cmd_run(std::move(req));
     }
     if (validate->parsed()) {
       Graph g = load_graph(graph_path);

@@ -4,8 +4,10 @@
 
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 
 #include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
@@ -58,6 +60,48 @@ FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, b
               true);
   append_text(dir_ + "/" + kColliderPosesFile, collider_poses_header(), true);
   std::filesystem::remove(dir_ + "/colliders.csv", ec);  // written from the first frame with feedback
+}
+
+namespace {
+
+// Keeps the header and the rows of a CSV whose first field (the frame) is at most `after`,
+// through a temporary file renamed over it.
+void keep_rows_up_to(const std::string& path, int after) {
+  std::ifstream in(path);
+  std::string line, kept;
+  for (bool header = true; std::getline(in, line); header = false)
+    if (header || std::atoi(line.c_str()) <= after) kept += line + "\n";
+  in.close();
+  append_text(path + ".tmp", kept, true);
+  std::error_code ec;
+  std::filesystem::rename(path + ".tmp", path, ec);
+  if (ec) throw WriteError(path + ": cannot write (" + ec.message() + ")");
+}
+
+}  // namespace
+
+FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> attributes,
+                                    int after) {
+  namespace fs = std::filesystem;
+  FrameWriter w;
+  w.dir_ = std::move(dir);
+  w.attributes_ = std::move(attributes);
+  std::error_code ec;
+  if (!fs::is_regular_file(w.dir_ + "/stats.csv", ec))
+    throw LoadError(w.dir_, "", "not the folder of a run (it has no stats.csv)");
+  if (access(w.dir_.c_str(), W_OK | X_OK) != 0)
+    throw LoadError(w.dir_, "", std::string("cannot write in the output folder (") +
+                                    std::strerror(errno) + ")");
+  for (const char* csv : {"stats.csv", kColliderPosesFile, "colliders.csv"})
+    if (fs::is_regular_file(w.dir_ + "/" + csv, ec)) keep_rows_up_to(w.dir_ + "/" + csv, after);
+  for (const auto& e : fs::directory_iterator(w.dir_, ec)) {
+    const std::string name = e.path().filename().string();
+    const bool tmp = name.ends_with(".ply.tmp");
+    if (name.starts_with("frame_") && (tmp || (name.ends_with(".ply") &&
+                                                std::atoi(name.c_str() + 6) > after)))
+      fs::remove(e.path(), ec);
+  }
+  return w;
 }
 
 void FrameWriter::write(const FrameOutput& out) {

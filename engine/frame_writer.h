@@ -18,10 +18,15 @@ class FrameWriter : public FrameSink {
   // Makes the folder and starts stats.csv and collider_poses.csv (their headers). A folder that
   // cannot be made or written in is bad input (LoadError), refused before any frame runs.
   FrameWriter(std::string dir, std::vector<std::string> attributes, bool all_attributes = false);
+  // Continues the folder of a run resumed after frame `after` (grains run --resume): keeps its
+  // frames and CSV rows up to that frame, and removes those after it, which the run wrote before
+  // it was stopped. A folder without a run's stats.csv is bad input (LoadError).
+  static FrameWriter continuing(std::string dir, std::vector<std::string> attributes, int after);
   void write(const FrameOutput& frame) override;
   const std::string& dir() const { return dir_; }
 
  private:
+  FrameWriter() = default;
   std::string dir_;
   std::vector<std::string> attributes_;
   bool all_ = false;

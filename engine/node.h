@@ -79,11 +79,21 @@ struct CookContext {
   size_t max_points = kDefaultMaxPoints;  // the point budget (check_point_budget)
 };
 
+class StateWriter;  // engine/state_stream.h
+class StateReader;
+
 class Node {
  public:
   virtual ~Node() = default;
   // Called once per substep, in chain order.
   virtual void cook(CookContext& ctx) = 0;
+  // What the node carries from one frame into the next (a source's emission clock, the grains
+  // solver's contact history, ...): everything of it that the next frames' results depend on,
+  // and nothing they recompute. save_state writes it at the end of a frame; load_state reads it
+  // into a node made fresh for the same graph, which then cooks on as the saved one would have,
+  // bit for bit (grains run --checkpoint-every / --resume). Nodes that carry nothing keep these.
+  virtual void save_state(StateWriter&) const {}
+  virtual void load_state(StateReader&) {}
 };
 
 enum class NodeRole {

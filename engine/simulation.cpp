@@ -335,6 +335,126 @@ void Simulation::step_object(SimObject& obj) {
                                      obj.feedback[k].angular_impulse * static_cast<float>(graph_.fps)});
 }
 
+namespace {
+
+void save_points(StateWriter& w, const ParticleStore& pts) {
+  w.section("points");
+  w.value<uint64_t>(pts.size());
+  w.value(pts.next_id());
+  w.value<uint64_t>(pts.attributes().size());
+  for (const auto& [name, a] : pts.attributes()) {
+    w.text(name);
+    w.value(a.type);
+    w.array(a.f);
+    w.array(a.i);
+  }
+  w.array(pts.prim_points());
+  w.value<uint64_t>(pts.prim_attributes().size());
+  for (const auto& [name, vals] : pts.prim_attributes()) {
+    w.text(name);
+    w.array(vals);
+  }
+}
+
+ParticleStore load_points(StateReader& r) {
+  r.section("points");
+  ParticleStore pts;
+  const uint64_t n = r.value<uint64_t>();
+  const int32_t next_id = r.value<int32_t>();
+  std::vector<float> f;
+  std::vector<int32_t> i;
+  std::vector<std::pair<std::string, Attribute>> attributes;
+  for (uint64_t k = r.value<uint64_t>(); k > 0; --k) {
+    std::string name = r.text();
+    Attribute a;
+    r.value(a.type);
+    r.array(a.f);
+    r.array(a.i);
+    const size_t want_f = a.type == AttribType::Int ? 0 : n * a.components();
+    const size_t want_i = a.type == AttribType::Int ? n : 0;
+    if (a.f.size() != want_f || a.i.size() != want_i)
+      r.fail("attribute '" + name + "' does not hold " + std::to_string(n) + " points");
+    attributes.emplace_back(std::move(name), std::move(a));
+  }
+  pts.add_points(n);
+  for (auto& [name, a] : attributes) {
+    Attribute& into = pts.add(name, a.type);
+    into.f = std::move(a.f);
+    into.i = std::move(a.i);
+  }
+  pts.set_next_id(next_id);
+  std::vector<int32_t> prims;
+  r.array(prims);
+  if (prims.size() % 2) r.fail("primitives must have two points each");
+  for (size_t p = 0; p + 1 < prims.size(); p += 2) pts.add_prim(prims[p], prims[p + 1]);
+  for (uint64_t k = r.value<uint64_t>(); k > 0; --k) {
+    const std::string name = r.text();
+    std::vector<float> vals;
+    r.array(vals);
+    if (vals.size() != prims.size() / 2)
+      r.fail("primitive attribute '" + name + "' does not hold every primitive");
+    std::copy(vals.begin(), vals.end(), pts.prim_f(name));
+  }
+  return pts;
+}
+
+}  // namespace
+
+void Simulation::save_state(StateWriter& w) const {
+  w.section("simulation");
+  w.value(frame_);
+  w.value<uint64_t>(objects_.size());
+  for (const auto& o : objects_) {
+    w.section("object");
+    w.text(o->name);
+    save_points(w, o->pts);
+    w.value(o->substeps);
+    w.value(o->colliders_posed);
+    w.value<uint64_t>(o->colliders.size());
+    for (const ColliderState& c : o->colliders) {
+      w.value(c.pose);
+      w.value(c.prev_pose);
+      w.value(c.dt);
+    }
+    w.value<uint64_t>(o->chain.size());
+    for (const ChainNode& c : o->chain) {
+      w.text(graph_.nodes[c.node].name);
+      if (c.impl) c.impl->save_state(w);
+    }
+  }
+}
+
+void Simulation::load_state(StateReader& r) {
+  r.section("simulation");
+  r.value(frame_);
+  if (frame_ < 0) r.fail("a negative frame count");
+  if (r.value<uint64_t>() != objects_.size())
+    r.fail("it was saved for another number of solvers than the graph has");
+  for (auto& o : objects_) {
+    r.section("object");
+    if (const std::string name = r.text(); name != o->name)
+      r.fail("it holds solver '" + name + "' where the graph has '" + o->name + "'");
+    o->pts = load_points(r);
+    r.value(o->substeps);
+    r.value(o->colliders_posed);
+    if (r.value<uint64_t>() != o->colliders.size())
+      r.fail("solver '" + o->name + "' had another number of colliders");
+    for (ColliderState& c : o->colliders) {
+      r.value(c.pose);
+      r.value(c.prev_pose);
+      r.value(c.dt);
+    }
+    if (r.value<uint64_t>() != o->chain.size())
+      r.fail("solver '" + o->name + "' had another chain of nodes");
+    for (ChainNode& c : o->chain) {
+      if (const std::string name = r.text(); name != graph_.nodes[c.node].name)
+        r.fail("solver '" + o->name + "' had node '" + name + "' where the graph has '" +
+               graph_.nodes[c.node].name + "'");
+      if (c.impl) c.impl->load_state(r);
+    }
+  }
+}
+
 double precise_reach(float r, float fraction) {
   // floats in [2^e, 2^(e+1)) are 2^(e-23) apart: the largest e with 2^(e-23) <= fraction * r
   return std::ldexp(1.0, static_cast<int>(std::floor(std::log2(double(fraction) * r))) + 24);

@@ -14,6 +14,7 @@
 
 #include "engine/graph.h"
 #include "engine/node.h"
+#include "engine/state_stream.h"
 
 namespace grains {
 
@@ -92,6 +93,13 @@ class Simulation {
   // Advances every object by one frame.
   void step_frame();
   int frame() const { return frame_; }  // frames completed
+  // The run's state at the end of frame(): each object's points, collider poses and substep
+  // count, and what each of its nodes carries (Node::save_state). load_state reads it into a
+  // Simulation made from the same graph, before its first step_frame; the frames after it are
+  // then those the saved run would have made, bit for bit. A state of another graph (other
+  // solvers or chains) is refused (StateError).
+  void save_state(StateWriter& w) const;
+  void load_state(StateReader& r);
   const Graph& graph() const { return graph_; }
   size_t object_count() const { return objects_.size(); }
   SimObject& object(size_t k) { return *objects_[k]; }

@@ -19,6 +19,7 @@
 
 #include "engine/geometry_io.h"
 #include "engine/node.h"
+#include "engine/state_stream.h"
 #include "nodes/common.h"
 #include "nodes/register.h"
 
@@ -64,6 +65,21 @@ class SourceNode : public Node {
       emit(ctx, pts);
       connect(ctx, first);
     }
+  }
+
+  // the emission clock: whether a `once` source has emitted, the part of a grain a `rate`
+  // source owes, the random draws taken (file_ is read and dropped within one cook)
+  void save_state(StateWriter& w) const override {
+    w.section("source");
+    w.value(emitted_);
+    w.value(carry_);
+    w.value(counter_);
+  }
+  void load_state(StateReader& r) override {
+    r.section("source");
+    r.value(emitted_);
+    r.value(carry_);
+    r.value(counter_);
   }
 
  private:

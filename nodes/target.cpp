@@ -22,6 +22,7 @@
 
 #include "engine/geometry_io.h"
 #include "engine/node.h"
+#include "engine/state_stream.h"
 #include "nodes/common.h"
 #include "nodes/register.h"
 
@@ -117,6 +118,21 @@ class TargetNode : public Node {
       float* tw = s.f("targetweight");
       for (uint32_t i : idx_) tw[i] = static_cast<float>(p.f("weight"));
     }
+  }
+
+  // whether the node made targetstiffness / targetweight itself at its first cook (the mesh is
+  // read again when needed)
+  void save_state(StateWriter& w) const override {
+    w.section("target");
+    w.value(first_);
+    w.value(owns_stiffness_);
+    w.value(owns_weight_);
+  }
+  void load_state(StateReader& r) override {
+    r.section("target");
+    r.value(first_);
+    r.value(owns_stiffness_);
+    r.value(owns_weight_);
   }
 
  private:

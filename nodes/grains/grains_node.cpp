@@ -139,6 +139,11 @@ class GrainsNode : public Node {
     }
   }
 
+  // the solver's (its cell order is made again at each frame's first substep; impact data
+  // starts again with each frame)
+  void save_state(StateWriter& w) const override { solver_.save_state(w); }
+  void load_state(StateReader& r) override { solver_.load_state(r); }
+
  private:
   // The table's rows (kernels/param_table.h) evaluated, and the moment's substep.
   GrainsSettings settings(const ParamSet& p, const CookContext& ctx) const {

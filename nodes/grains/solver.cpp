@@ -1049,6 +1049,62 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
   rows_skin_ = skin;
 }
 
+// ---- checkpoint ----
+
+void GrainsSolver::save_state(StateWriter& w) const {
+  w.section("grains rows");
+  w.value(rows_valid_);
+  w.value(rows_skin_);
+  w.value(rows_query_scale_);
+  w.value(rows_max_);
+  w.value(rows_uniform_);
+  w.array(rows_ids_);
+  w.array(rows_radius_);
+  w.array(rows_p_);
+  w.array(neighbors_.offsets);
+  w.array(neighbors_.indices);
+  w.section("grains history");
+  w.array(hist_id_);
+  w.array(hist_rows_.offsets);
+  w.array(hist_rows_.indices);
+  w.array(hist_plane_offsets_);
+  w.array(hist_plane_collider_);
+  w.array(hist_slip_);
+  w.array(hist_plane_slip_);
+  w.section("grains shapes");
+  w.array(shape_key_);
+  w.array(comp_offsets_);
+  w.array(comp_members_);
+  w.array(rest_offset_);
+}
+
+void GrainsSolver::load_state(StateReader& r) {
+  r.section("grains rows");
+  r.value(rows_valid_);
+  r.value(rows_skin_);
+  r.value(rows_query_scale_);
+  r.value(rows_max_);
+  r.value(rows_uniform_);
+  r.array(rows_ids_);
+  r.array(rows_radius_);
+  r.array(rows_p_);
+  r.array(neighbors_.offsets);
+  r.array(neighbors_.indices);
+  r.section("grains history");
+  r.array(hist_id_);
+  r.array(hist_rows_.offsets);
+  r.array(hist_rows_.indices);
+  r.array(hist_plane_offsets_);
+  r.array(hist_plane_collider_);
+  r.array(hist_slip_);
+  r.array(hist_plane_slip_);
+  r.section("grains shapes");
+  r.array(shape_key_);
+  r.array(comp_offsets_);
+  r.array(comp_members_);
+  r.array(rest_offset_);
+}
+
 // ---- contact history ----
 // The friction of a substep removes the slip of that substep; what the Jacobi iterations leave of
 // it (a grain between neighbours that slip opposite ways is pulled both ways at once) would be

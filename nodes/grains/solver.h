@@ -13,6 +13,7 @@
 
 #include "engine/collider.h"
 #include "engine/neighbors.h"
+#include "engine/state_stream.h"
 #include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
 
 namespace grains {
@@ -119,6 +120,11 @@ class GrainsSolver {
   static constexpr int kContactSlots = 4;  // = GR_MAX_PLANES (checked in solver.cpp)
   void substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                size_t collider_count, GrainsStats* stats = nullptr);
+  // What one substep leaves for the next, at a frame's end (Node::save_state): the neighbour
+  // rows kept for Verlet reuse and how they were built, the contact history, rigid shape
+  // matching's components and rest shapes. The rest is scratch, rebuilt in every substep.
+  void save_state(StateWriter& w) const;
+  void load_state(StateReader& r);
 
  private:
   void build_constraints(const GrainsData& d);

@@ -1,0 +1,157 @@
+// grains run --checkpoint-every / --resume: a run killed part-way and resumed from its last
+// checkpoint writes the same files, bit for bit, as a run that was never stopped.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <catch2/catch_test_macros.hpp>
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+#include "tests/support/support.h"
+
+using namespace grains;
+using namespace grains::test;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A pour with everything that carries state from one frame to the next: a source emitting at a
+// rate (the part of a grain it owes, its random draws), a once-source of a rigid sheet (shape
+// matching's rest shapes, explicit constraints), pins on the sheet set by a target node (which
+// owns targetstiffness), friction's contact history, the Verlet rows, a collider moving under
+// an expression with collision feedback, and error control's substep count.
+const char* kScene = R"({"grains_graph": 1, "name": "resume", "fps": 24, "frames": 18, "seed": 5,
+  "nodes": [
+  {"name": "pour", "type": "source", "params": {"emission": "rate", "rate": 600,
+    "shape": "box", "center": [0, 0.35, 0], "size": [0.12, 0.04, 0.12], "separation": 0.02,
+    "velocity": [0, -0.5, 0]}},
+  {"name": "sheet", "type": "source", "params": {"shape": "grid", "center": [0.25, 0.15, 0],
+    "size": [0.16, 0, 0.16], "separation": 0.02, "connect_radius": 1.5, "birth_frame": 3}},
+  {"name": "pin", "type": "target", "inputs": ["sheet"], "params": {"stiffness": 0.2,
+    "translate": ["0", "0.1 * sin($T * 6)", "0"]}},
+  {"name": "g", "type": "grains", "inputs": ["pour", "pin"], "params": {
+    "enable_rigid_shape_matching": true, "enable_collision_feedback": true,
+    "add_impact_data": true}},
+  {"name": "ground", "type": "collider", "params": {"shape": "plane"}},
+  {"name": "paddle", "type": "collider", "params": {"shape": "box", "size": [0.3, 0.05, 0.05],
+    "translate": ["-0.1 + 0.2 * $T", "0.04", "0"]}},
+  {"name": "s", "type": "solver", "inputs": ["g"], "params": {"max_substeps": 16, "colliders": ["ground", "paddle"]}}],
+  "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"]}})";
+
+// The child `grains run ARGS`, killed (SIGKILL) as soon as `dir`'s stats.csv holds `rows`
+// frames; returns the frames it had written, or -1 when it ended by itself first.
+int run_and_kill(const std::string& args, const std::string& dir, int rows) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, 1);
+    dup2(null, 2);
+    execl("/bin/sh", "sh", "-c", (std::string(GRAINS_BINARY) + " " + args).c_str(), nullptr);
+    _exit(127);
+  }
+  auto frames_written = [&] {
+    int lines = 0;
+    for (char c : read_text(dir + "/stats.csv")) lines += c == '\n';
+    return lines - 1;
+  };
+  int status = 0;
+  while (waitpid(pid, &status, WNOHANG) == 0) {
+    if (frames_written() >= rows) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      return frames_written();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return -1;
+}
+
+// stats.csv without its wall_ms column (the one field that is a measured time)
+std::string stats_without_time(const std::string& dir) {
+  std::string out;
+  for (const std::string& line : split(read_text(dir + "/stats.csv"), '\n')) {
+    const std::vector<std::string> f = split(line, ',');
+    for (size_t k = 0; k < f.size(); ++k)
+      if (k != 4) out += f[k] + (k + 1 < f.size() ? "," : "\n");
+  }
+  return out;
+}
+
+void require_same_run(const std::string& a, const std::string& b, int frames) {
+  for (int f = 1; f <= frames; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "/frame_%04d.ply", f);
+    INFO("frame " << f);
+    REQUIRE(fs::exists(b + name));
+    REQUIRE(read_text(a + name) == read_text(b + name));
+  }
+  CHECK_FALSE(fs::exists(b + "/frame_" + std::to_string(frames + 1) + ".ply"));
+  CHECK(stats_without_time(a) == stats_without_time(b));
+  CHECK(read_text(a + "/collider_poses.csv") == read_text(b + "/collider_poses.csv"));
+  CHECK(read_text(a + "/colliders.csv") == read_text(b + "/colliders.csv"));
+  CHECK(read_text(a + "/colliders.csv").size() > 100);  // the feedback was written
+}
+
+}  // namespace
+
+TEST_CASE("a killed run resumed from its checkpoint writes the frames of an unbroken run",
+          "[checkpoint][cli]") {
+  const std::string dir = temp_dir("resume");
+  const std::string graph = write_file(dir, "scene.json", kScene);
+  const std::string log = dir + "/log.txt";
+  // the run that is never stopped, on two threads; the broken one runs on one
+  REQUIRE(run_grains("run " + graph + " --out " + dir + "/a --quiet --threads 2", log) == 0);
+
+  const std::string b = dir + "/b";
+  // killed two frames past its second checkpoint (frame 8): frames 9 and 10 are made again
+  const int written =
+      run_and_kill("run " + graph + " --out " + b + " --quiet --threads 1 --frames 14 "
+                   "--checkpoint-every 4", b, 10);
+  REQUIRE(written >= 10);
+  REQUIRE(written < 14);
+  REQUIRE(run_grains("run --resume " + b + " --quiet --threads 1", log) == 0);
+  // the run ended at frame 14 with a checkpoint there; --frames lengthens it to the graph's 18
+  REQUIRE(run_grains("run --resume " + b + " --quiet --frames 18", log) == 0);
+  require_same_run(dir + "/a", b, 18);
+}
+
+TEST_CASE("resume refuses what would not continue the same run", "[checkpoint][cli]") {
+  const std::string dir = temp_dir("resume_refused");
+  std::string scene = kScene;
+  const std::string graph = write_file(dir, "scene.json", scene);
+  const std::string log = dir + "/log.txt";
+  const std::string out = dir + "/out";
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --quiet --frames 2 --checkpoint-every 1",
+                     log) == 0);
+  SECTION("no checkpoint") {
+    REQUIRE(run_grains("run --resume " + dir, log) == 2);
+    CHECK(read_text(log).find("no checkpoint there") != std::string::npos);
+  }
+  SECTION("a changed graph") {
+    write_file(dir, "scene.json", scene + " ");
+    REQUIRE(run_grains("run --resume " + out, log) == 2);
+    CHECK(read_text(log).find("the graph has changed since the checkpoint") != std::string::npos);
+  }
+  SECTION("overrides") {
+    REQUIRE(run_grains("run --resume " + out + " --set g.friction_with_particles=0.1", log) == 2);
+    CHECK(read_text(log).find("--set cannot change it") != std::string::npos);
+  }
+  SECTION("fewer frames than it has made") {
+    REQUIRE(run_grains("run --resume " + out + " --frames 1", log) == 2);
+    CHECK(read_text(log).find("the checkpoint is at frame 2") != std::string::npos);
+  }
+  SECTION("a damaged checkpoint") {
+    std::string bytes = read_text(out + "/checkpoint.grains");
+    bytes[bytes.size() / 2] ^= 1;
+    write_file(out, "checkpoint.grains", bytes);
+    REQUIRE(run_grains("run --resume " + out, log) == 2);
+    CHECK(read_text(log).find("damaged") != std::string::npos);
+  }
+  SECTION("--overwrite removes it with the frames") {
+    REQUIRE(run_grains("run " + graph + " --out " + out + " --quiet --frames 1 --overwrite", log) == 0);
+    CHECK_FALSE(fs::exists(out + "/checkpoint.grains"));
+  }
+}

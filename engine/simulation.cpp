@@ -1,6 +1,7 @@
 #include "engine/simulation.h"
 
 #include <omp.h>
+#include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
 #include <cmath>
@@ -333,6 +334,14 @@ void Simulation::step_object(SimObject& obj) {
       obj.stats.colliders.push_back({graph_.nodes[obj.collider_nodes[k]].name,
                                      obj.feedback[k].impulse * static_cast<float>(graph_.fps),
                                      obj.feedback[k].angular_impulse * static_cast<float>(graph_.fps)});
+}
+
+std::string frame_detail(const FrameStats& s) {
+  return fmt::format(
+      "{} points, {} constraints, {} substeps, error {:.3g}, kinetic energy {:.4g} J, "
+      "max_penetration {:.4f}, {:.1f} ms",
+      s.points, s.constraints, s.substeps, s.error, s.kinetic_energy, s.max_penetration,
+      s.wall_ms);
 }
 
 double precise_reach(float r, float fraction) {

@@ -2,6 +2,8 @@
 #include "app/cli.h"
 
 #include <omp.h>
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -13,6 +15,7 @@
 #include <iostream>
 #include <optional>
 
+#include "cli/log.h"
 #include "cli/options.h"
 #include "cli/program.h"
 #include "engine/checkpoint.h"
@@ -38,14 +41,63 @@ std::vector<Override> parse_overrides(const std::vector<std::string>& sets) {
   return out;
 }
 
-void progress(int done, int total, double ms, size_t points) {
-  int width = 30;
-  int filled = total > 0 ? done * width / total : width;
-  std::fprintf(stderr, "\r[%.*s%*s] %d/%d frames  %zu points  %.1f ms/frame ", filled,
-               "##############################", width - filled, "", done, total, points, ms);
-  if (done == total) std::fputc('\n', stderr);
-  std::fflush(stderr);
+// "4.2 s", "3 min 05 s", "2 h 07 min": a duration as a person reads it.
+std::string duration_text(double s) {
+  if (s < 60) return fmt::format("{:.1f} s", s);
+  const long whole = std::lround(s);
+  if (whole < 3600) return fmt::format("{} min {:02} s", whole / 60, whole % 60);
+  return fmt::format("{} h {:02} min", whole / 3600, whole % 3600 / 60);
 }
+
+// A run's progress, told once a frame (frame), with the time it has taken and an estimate of the
+// time left (the mean time per frame so far, times the frames left):
+// - on a terminal, at the default level: a bar redrawn in place. It is written to stderr
+//   directly, not logged: spdlog ends every message with a newline, and the bar must stay on
+//   one line to be redrawn with '\r'.
+// - otherwise an info line, "frame 10/96  points 1500  12.3 ms  max_penetration 0.0012
+//   elapsed 4.1 s  left 35.2 s", for the first frame, the last, and at most one every
+//   kEvery seconds between them (a long run's log stays short); with --verbose, every frame.
+class RunProgress {
+ public:
+  static constexpr double kEvery = 5;  // s between two lines, at the default level
+
+  // frames: the run's last frame; first: the frame it starts at (after a checkpoint when resumed)
+  RunProgress(int frames, bool tty, int first = 1)
+      : frames_(frames), first_(first), bar_(tty && !log_verbose()) {}
+
+  void frame(int done, size_t points, double ms, float max_penetration) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const int made = done - first_ + 1;  // by this process
+    const double left = made > 0 ? elapsed / made * (frames_ - done) : 0;
+    if (bar_) {
+      draw_bar(done, points, ms, elapsed, left);
+      return;
+    }
+    if (!(done == first_ || done == frames_ || elapsed - said_at_ >= kEvery || log_verbose())) return;
+    said_at_ = elapsed;
+    spdlog::info("frame {}/{}  points {}  {:.1f} ms  max_penetration {:.4f}  elapsed {}  left {}",
+                 done, frames_, points, ms, max_penetration, duration_text(elapsed),
+                 duration_text(left));
+  }
+
+ private:
+  void draw_bar(int done, size_t points, double ms, double elapsed, double left) const {
+    const int width = 30;
+    const int filled = frames_ > 0 ? done * width / frames_ : width;
+    std::fprintf(stderr,
+                 "\r[%.*s%*s] %d/%d frames  %zu points  %.1f ms/frame  %s elapsed, %s left   ",
+                 filled, "##############################", width - filled, "", done, frames_,
+                 points, ms, duration_text(elapsed).c_str(), duration_text(left).c_str());
+    if (done == frames_) std::fputc('\n', stderr);
+    std::fflush(stderr);
+  }
+
+  int frames_, first_;
+  bool bar_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  double said_at_ = 0;  // elapsed s at the last line
+};
 
 // What a run writes in its folder: frames, stats.csv, collider_poses.csv, and the frames' .tmp
 // files while writing.
@@ -96,22 +148,24 @@ void prepare_output(const std::vector<std::string>& dirs, bool overwrite,
 }
 
 // The float precision of an object's positions: stated once at its first frame with points
-// (unless quiet), and a warning, always, the first time contacts are resolved no finer than
-// kWarnResolution of the smallest radius (Simulation stops the run at kCoarsestResolution).
-void say_precision(const SimObject& o, bool quiet, int& said) {
+// (info: not with --quiet), and a warning, always, the first time contacts are resolved no finer
+// than kWarnResolution of the smallest radius (Simulation stops the run at kCoarsestResolution).
+void say_precision(const SimObject& o, int& said) {
   const FrameStats& s = o.stats;
   if (said == 2 || s.min_radius <= 0) return;
   const bool coarse = s.resolution >= kWarnResolution * s.min_radius;
-  if (!coarse && (said == 1 || quiet)) return;
-  std::fprintf(stderr,
-               "%s: solver '%s', frame %d: points reach %.4g m from the origin, where positions "
-               "are resolved to %.3g m, %.3g of the smallest grain radius %.3g m",
-               coarse ? "grains: warning" : "precision", o.name.c_str(), s.frame, s.max_coordinate,
-               s.resolution, s.resolution / s.min_radius, s.min_radius);
+  if (!coarse && said == 1) return;
+  const std::string where = fmt::format(
+      "solver '{}', frame {}: points reach {:.4g} m from the origin, where positions are "
+      "resolved to {:.3g} m, {:.3g} of the smallest grain radius {:.3g} m",
+      o.name, s.frame, s.max_coordinate, s.resolution, s.resolution / s.min_radius, s.min_radius);
   if (coarse)
-    std::fprintf(stderr, "; contacts are solved no finer than that (within %.4g m they would be)",
-                 precise_reach(s.min_radius, kWarnResolution));
-  std::fputc('\n', stderr);
+    spdlog::warn(
+        "grains: warning: {}; contacts are solved no finer than that (within {:.4g} m they "
+        "would be)",
+        where, precise_reach(s.min_radius, kWarnResolution));
+  else
+    spdlog::info("precision: {}", where);
   said = coarse ? 2 : 1;
 }
 
@@ -168,6 +222,8 @@ int cmd_run(RunRequest req) {
   if (req.graph.empty()) throw LoadError("grains run", "", "name a graph file, or --resume DIR");
   Graph g = load_graph(req.graph, parse_overrides(req.sets));
   if (req.frames > 0) g.frames = req.frames;
+  spdlog::debug("graph {}: {} nodes, {} solvers, {} frames at {:g} fps", req.graph, g.nodes.size(),
+                g.solvers.size(), g.frames, g.fps);
   const std::string out = req.out.empty() ? g.output.dir : req.out;
   const bool quiet = req.quiet;
   Simulation sim(g, req.threads);
@@ -215,7 +271,9 @@ int cmd_run(RunRequest req) {
     record.checkpoint_every = req.checkpoint_every;
     record.max_points = req.max_points;
   }
+  for (const std::string& dir : dirs) spdlog::debug("writing frames to {}", dir);
   bool tty = isatty(fileno(stderr)) && !quiet;
+  RunProgress progress(g.frames, tty, first);
   std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
   for (int f = first; f <= g.frames; ++f) {
     sim.step_frame();
@@ -223,7 +281,8 @@ int cmd_run(RunRequest req) {
     double ms = 0;
     for (size_t k = 0; k < sim.object_count(); ++k) {
       const SimObject& o = sim.object(k);
-      say_precision(o, quiet, precision_said[k]);
+      say_precision(o, precision_said[k]);
+      spdlog::debug("frame {} solver '{}': {}", f, o.name, frame_detail(o.stats));
       sinks[k]->write(frame_output(f, o, f % g.output.every == 0));
       points += o.pts.size();
       ms += o.stats.wall_ms;
@@ -231,13 +290,9 @@ int cmd_run(RunRequest req) {
     // after the frame's files: a checkpoint never runs ahead of the frames it resumes after
     if (req.checkpoint_every > 0 && (f % req.checkpoint_every == 0 || f == g.frames))
       write_checkpoint(out, record, sim);
-    if (tty)
-      progress(f, g.frames, ms, points);
-    else if (!quiet)
-      std::fprintf(stderr, "frame %d/%d  points %zu  %.1f ms  max_penetration %.4f\n", f, g.frames,
-                   points, ms, sim.object(0).stats.max_penetration);
+    progress.frame(f, points, ms, sim.object(0).stats.max_penetration);
   }
-  if (!quiet) std::fprintf(stderr, "wrote %s\n", out.c_str());
+  spdlog::info("wrote {}", out);
   return 0;
 }
 
@@ -320,8 +375,7 @@ int cmd_cook(const std::string& type, const std::string& in, const std::vector<s
   o.out_dir = out;
   o.source = "cook " + type;
   cook_node(type, params, pts, o);
-  std::fprintf(stderr, "cooked %s on %zu points; wrote %s\n", type.c_str(), pts.size(),
-               out.c_str());
+  spdlog::info("cooked {} on {} points; wrote {}", type, pts.size(), out);
   return 0;
 }
 
@@ -354,7 +408,7 @@ int cli_main(int argc, char** argv) {
 
   std::string graph_path, out, in, type, cook_out;
   int frames = 0, threads = 0, substeps = 1, cook_frames = 1;
-  bool quiet = false, markdown = false, opencl = false, overwrite = false;
+  bool quiet = false, verbose = false, markdown = false, opencl = false, overwrite = false;
   float ground = 0;
   size_t max_points = kDefaultMaxPoints;
   std::vector<std::string> sets;
@@ -369,7 +423,7 @@ int cli_main(int argc, char** argv) {
       ->check(CLI::Range(1, kMaxThreads));
   run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
-  run->add_flag("--quiet", quiet, "print nothing but errors");
+  add_verbosity_flags(run, quiet, verbose);
   auto* max_points_opt = run->add_option("--max-points", max_points,
                   "the most points the run may hold (default 20000000, about 12 GB)")
       ->check(positive_number());
@@ -405,6 +459,7 @@ int cli_main(int argc, char** argv) {
   cook->add_flag("--overwrite", overwrite,
                  "replace the frames, stats.csv and collider_poses.csv an earlier cook left in "
                  "the output folder");
+  add_verbosity_flags(cook, quiet, verbose);
 
   std::string heap_frame;
   double heap_d = 0, heap_cx = 0, heap_cz = 0;
@@ -421,10 +476,12 @@ int cli_main(int argc, char** argv) {
 
   if (const int rc = parse_command_line("grains", app, argc, argv); rc >= 0) return rc;
 
+  // run and cook share the flags; render has its own (it sets the level itself)
+  set_log_level(quiet, verbose);
   return report_errors("grains", [&]() -> int {
     if (run->parsed()) {
       if (opencl) {
-        std::fprintf(stderr, "grains: --opencl: this build has no OpenCL path yet\n");
+        spdlog::error("grains: --opencl: this build has no OpenCL path yet");
         return kBadInput;
       }
       req.graph = graph_path;

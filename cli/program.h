@@ -2,10 +2,12 @@
 // parse of the command line, and the mapping of an error to its exit code and message.
 #pragma once
 #include <CLI/CLI.hpp>
-#include <cstdio>
 #include <exception>
+#include <iostream>
+#include <sstream>
 #include <string>
 
+#include "cli/log.h"
 #include "cli/options.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
@@ -16,9 +18,11 @@ namespace grains {
 constexpr int kBadInput = 2;    // the graph, a parameter, a file or an option is wrong
 constexpr int kRunFailure = 1;  // a failure while running (a non-finite state, a failed write)
 
-// Parses the command line of `program` and checks its floating-point options. Returns -1 when a subcommand is
-// to run, else the exit code: 0 after --help, kBadInput for a bad command line.
+// Parses the command line of `program` and checks its floating-point options. Returns -1 when a
+// subcommand is to run, else the exit code: 0 after --help, kBadInput for a bad command line. Sets
+// up the logger (cli/log.h) at its default level; the command sets the level its options ask for.
 inline int parse_command_line(const char* program, CLI::App& app, int argc, char** argv) {
+  set_log_level(false, false);
   // a first word that names no subcommand: say so and list them (CLI11 would say only that a
   // subcommand is required)
   if (argc > 1 && argv[1][0] != '-') {
@@ -29,8 +33,8 @@ inline int parse_command_line(const char* program, CLI::App& app, int argc, char
       names += (names.empty() ? "" : ", ") + sub->get_name();
     }
     if (!known) {
-      std::fprintf(stderr, "%s: unknown command '%s' (commands: %s; --help for more)\n", program,
-                   argv[1], names.c_str());
+      spdlog::error("{}: unknown command '{}' (commands: {}; --help for more)", program, argv[1],
+                    names);
       return kBadInput;
     }
   }
@@ -38,7 +42,13 @@ inline int parse_command_line(const char* program, CLI::App& app, int argc, char
     app.parse(argc, argv);
     check_float_options(app);
   } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
+    // --help goes to stdout; CLI11's message for a bad command line is logged as an error, the
+    // same lines
+    std::ostringstream err;
+    const int rc = app.exit(e, std::cout, err);
+    std::string text = err.str();
+    while (!text.empty() && text.back() == '\n') text.pop_back();
+    if (!text.empty()) spdlog::error("{}", text);
     return rc == 0 ? 0 : kBadInput;
   }
   return -1;
@@ -51,13 +61,13 @@ int report_errors(const char* program, Body&& body) {
   try {
     return body();
   } catch (const LoadError& e) {
-    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    spdlog::error("{}: error: {}", program, e.what());
   } catch (const GeometryError& e) {
-    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    spdlog::error("{}: error: {}", program, e.what());
   } catch (const BudgetError& e) {
-    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    spdlog::error("{}: error: {}", program, e.what());
   } catch (const std::exception& e) {  // a non-finite state, a WriteError (disk full), ...
-    std::fprintf(stderr, "%s: failed: %s\n", program, e.what());
+    spdlog::error("{}: failed: {}", program, e.what());
     return kRunFailure;
   }
   return kBadInput;

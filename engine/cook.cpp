@@ -1,5 +1,7 @@
 #include "engine/cook.h"
 
+#include <spdlog/spdlog.h>
+
 #include <nlohmann/json.hpp>
 
 #include "engine/frame_writer.h"
@@ -65,6 +67,7 @@ void cook_node(const std::string& type,
       throw e.file == opt.source ? as_set(e) : e;
     }
     if (writer) writer->write(frame_output(sim.frame(), sim.object(0), true));
+    spdlog::debug("cook {}: frame {}: {}", type, sim.frame(), frame_detail(sim.object(0).stats));
   }
   state = std::move(sim.object(0).pts);
 }

@@ -1,6 +1,7 @@
 #include "engine/simulation.h"
 
 #include <omp.h>
+#include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
 #include <cmath>
@@ -453,6 +454,14 @@ void Simulation::load_state(StateReader& r) {
       if (c.impl) c.impl->load_state(r);
     }
   }
+}
+
+std::string frame_detail(const FrameStats& s) {
+  return fmt::format(
+      "{} points, {} constraints, {} substeps, error {:.3g}, kinetic energy {:.4g} J, "
+      "max_penetration {:.4f}, {:.1f} ms",
+      s.points, s.constraints, s.substeps, s.error, s.kinetic_energy, s.max_penetration,
+      s.wall_ms);
 }
 
 double precise_reach(float r, float fraction) {

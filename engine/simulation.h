@@ -42,6 +42,10 @@ struct FrameStats {
   float max_coordinate = 0, resolution = 0, min_radius = 0;
 };
 
+// A frame's figures in one line (what --verbose prints each frame): "27 points, 0 constraints,
+// 2 substeps, error 0, kinetic energy 0.0123 J, max_penetration 0.0000, 1.2 ms".
+std::string frame_detail(const FrameStats& s);
+
 // Positions are floats: at distance x from the origin they are resolved to the float spacing
 // there, 2^(floor(log2 x) - 23) (1 m at 1e7 m). A frame whose resolution reaches
 // kCoarsestResolution of the smallest grain radius stops the run (grains there cannot be told

@@ -2,6 +2,7 @@
 // Each (scene, setting) is one forked run of lab/bench_run.h's child runner.
 #include "lab/bench.h"
 
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -395,16 +396,15 @@ int run_bench(const BenchOptions& o) {
         BenchRow& kept = rows[row_of[q]];
         size_t compared = 0;
         if (rms_difference(pos, finals[row_of[q]], compared) != 0 || compared != pos.size())
-          std::fprintf(stderr,
-                       "bench: warning: %s (%s) ended elsewhere on run %d: the runs are "
-                       "not deterministic\n",
-                       row.scene.c_str(), label.c_str(), round + 1);
+          spdlog::warn(
+              "bench: warning: {} ({}) ended elsewhere on run {}: the runs are not deterministic",
+              row.scene, label, round + 1);
         if (row.step_s < kept.step_s) {
           kept.step_s = row.step_s;
           kept.wall_s = row.wall_s;
         }
-        std::fprintf(stderr, "bench %-16s %2d x %-3d%s run %d: %.4g s/frame, fastest %.4g\n",
-                     row.scene.c_str(), st.substeps, st.iterations, row.reference ? " ref" : "    ",
+        spdlog::info("bench {:<16} {:2} x {:<3}{} run {}: {:.4g} s/frame, fastest {:.4g}",
+                     row.scene, st.substeps, st.iterations, row.reference ? " ref" : "    ",
                      round + 1, row.s_per_frame(), kept.s_per_frame());
         continue;
       }
@@ -413,13 +413,11 @@ int run_bench(const BenchOptions& o) {
         ref_index = static_cast<int>(rows.size());
         ref_pscale = pscale;
       }
-      std::fprintf(
-          stderr,
-          "bench %-16s %2d x %-3d%s %d frames  %zu points  %.4g s/frame  %s particle-iter/s  "
-          "%.1f MiB  max pen %.3g\n",
-          row.scene.c_str(), st.substeps, st.iterations, row.reference ? " ref" : "    ",
-          row.frames, row.points, row.s_per_frame(), si(row.pi_per_s()).c_str(), row.peak_mib,
-          row.max_penetration);
+      spdlog::info(
+          "bench {:<16} {:2} x {:<3}{} {} frames  {} points  {:.4g} s/frame  {} particle-iter/s  "
+          "{:.1f} MiB  max pen {:.3g}",
+          row.scene, st.substeps, st.iterations, row.reference ? " ref" : "    ", row.frames,
+          row.points, row.s_per_frame(), si(row.pi_per_s()), row.peak_mib, row.max_penetration);
       rows.push_back(row);
       finals.push_back(std::move(pos));
     }
@@ -430,7 +428,7 @@ int run_bench(const BenchOptions& o) {
       }
       double rms = rms_difference(finals[k], finals[ref_index], rows[k].compared);
       rows[k].error_radii = ref_pscale > 0 ? rms / ref_pscale : std::nan("");
-      std::fprintf(stderr, "bench %-16s %2d x %-3d error %.4g grain radii\n", rows[k].scene.c_str(),
+      spdlog::info("bench {:<16} {:2} x {:<3} error {:.4g} grain radii", rows[k].scene,
                    rows[k].setting.substeps, rows[k].setting.iterations, rows[k].error_radii);
     }
     all.push_back(std::move(rows));
@@ -441,7 +439,7 @@ int run_bench(const BenchOptions& o) {
   write_csv(all, csv);
   write_pareto_png(all, png);
   write_markdown(all, o, machine, threads, o.md_path);
-  std::fprintf(stderr, "wrote %s, %s and %s\n", csv.c_str(), png.c_str(), o.md_path.c_str());
+  spdlog::info("wrote {}, {} and {}", csv, png, o.md_path);
   return failures ? 1 : 0;
 }
 

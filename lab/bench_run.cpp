@@ -9,6 +9,7 @@
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
+#include <spdlog/spdlog.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -117,6 +118,8 @@ void child_run(const std::string& path, const std::vector<Override>& overrides, 
   rec.baseline_bytes = resident_bytes();
   rec.threads = threads;
   rec.frames = g.frames;
+  spdlog::debug("{}: {} frames at {} substeps x {} iterations, in a child process", path, g.frames,
+                setting.substeps, setting.iterations);
   Simulation sim(g, threads);
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
@@ -133,6 +136,9 @@ void child_run(const std::string& path, const std::vector<Override>& overrides, 
     rec.constraint_iterations += static_cast<double>(setting.substeps) *
                                  static_cast<double>(constraints) * setting.iterations;
     if (f == 1) rec.energy_initial = total_energy(sim);
+    for (size_t k = 0; k < sim.object_count(); ++k)
+      spdlog::debug("  frame {} solver '{}': {}", f, sim.object(k).name,
+                    frame_detail(sim.object(k).stats));
   }
   rec.energy_final = total_energy(sim);
 
@@ -201,11 +207,10 @@ int run_child(const std::string& path, const std::vector<Override>& overrides,
     try {
       child_run(path, overrides, frames, threads, result_path);
     } catch (const LoadError& e) {
-      std::fprintf(stderr, "grains-lab: error: %s\n", e.what());
+      spdlog::error("grains-lab: error: {}", e.what());
       rc = 2;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "grains-lab: %s (%s) failed: %s\n", path.c_str(), label.c_str(),
-                   e.what());
+      spdlog::error("grains-lab: {} ({}) failed: {}", path, label, e.what());
       rc = 1;
     }
     std::fflush(nullptr);
@@ -216,8 +221,8 @@ int run_child(const std::string& path, const std::vector<Override>& overrides,
   if (wait4(pid, &status, 0, &ru) < 0)
     throw std::runtime_error(std::string("wait4 failed: ") + std::strerror(errno));
   if (!WIFEXITED(status)) {
-    std::fprintf(stderr, "grains-lab: %s (%s): the run died (signal %d)\n", path.c_str(),
-                 label.c_str(), WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+    spdlog::error("grains-lab: {} ({}): the run died (signal {})", path, label,
+                  WIFSIGNALED(status) ? WTERMSIG(status) : 0);
     return 1;
   }
   if (WEXITSTATUS(status) != 0) return WEXITSTATUS(status);

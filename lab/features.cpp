@@ -8,6 +8,7 @@
 // final positions must match the first baseline's exactly (`moved` 0).
 #include "lab/features.h"
 
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -241,8 +242,8 @@ int run_feature_bench(const FeatureOptions& o) {
         kept.run.step_s = row.run.step_s;
         kept.run.wall_s = row.run.wall_s;
       }
-      std::fprintf(stderr, "features %-36s run %d: %.4g s/frame, fastest %.4g\n", f.name.c_str(),
-                   round + 1, row.run.s_per_frame(), kept.run.s_per_frame());
+      spdlog::info("features {:<36} run {}: {:.4g} s/frame, fastest {:.4g}", f.name, round + 1,
+                   row.run.s_per_frame(), kept.run.s_per_frame());
       continue;
     }
     row_of[k] = static_cast<int>(rows.size());
@@ -255,18 +256,16 @@ int run_feature_bench(const FeatureOptions& o) {
     row.cost_ratio = have_base && base_spf > 0 ? row.run.s_per_frame() / base_spf : std::nan("");
     double rms = have_base ? bench::rms_difference(pos, base_pos, row.compared) : std::nan("");
     row.moved_radii = base_pscale > 0 ? rms / base_pscale : std::nan("");
-    std::fprintf(
-        stderr,
-        "features %-36s %d frames  %zu points  %.4g s/frame  %s particle-iter/s  cost %.2f  "
-        "%.1f MiB  max pen %.3g  mean pen %.3g\n",
-        f.name.c_str(), row.run.frames, row.run.points, row.run.s_per_frame(),
-        bench::si(row.run.pi_per_s()).c_str(), row.cost_ratio, row.run.peak_mib,
-        row.run.max_penetration, row.run.mean_penetration);
+    spdlog::info(
+        "features {:<36} {} frames  {} points  {:.4g} s/frame  {} particle-iter/s  cost {:.2f}  "
+        "{:.1f} MiB  max pen {:.3g}  mean pen {:.3g}",
+        f.name, row.run.frames, row.run.points, row.run.s_per_frame(),
+        bench::si(row.run.pi_per_s()), row.cost_ratio, row.run.peak_mib, row.run.max_penetration,
+        row.run.mean_penetration);
     if (f.name == kFeatureBaselineAgain && row.moved_radii != 0)
-      std::fprintf(
-          stderr,
-          "features: warning: the repeated baseline ended %.3g grain radii from the first: "
-          "the runs are not deterministic, so `moved` mixes in noise\n",
+      spdlog::warn(
+          "features: warning: the repeated baseline ended {:.3g} grain radii from the first: "
+          "the runs are not deterministic, so `moved` mixes in noise",
           row.moved_radii);
     rows.push_back(std::move(row));
   }
@@ -279,8 +278,7 @@ int run_feature_bench(const FeatureOptions& o) {
   std::string csv = o.out_dir + "/features.csv";
   write_features_csv(rows, csv);
   if (!have_base) {
-    std::fprintf(stderr, "wrote %s; the baseline failed, so %s is left as it was\n", csv.c_str(),
-                 o.md_path.c_str());
+    spdlog::error("wrote {}; the baseline failed, so {} is left as it was", csv, o.md_path);
     return 1;
   }
   std::string old;
@@ -301,7 +299,7 @@ int run_feature_bench(const FeatureOptions& o) {
     if (!out.flush()) throw std::runtime_error(tmp + ": write failed");
   }
   fs::rename(tmp, o.md_path);
-  std::fprintf(stderr, "wrote %s and the features section of %s\n", csv.c_str(), o.md_path.c_str());
+  spdlog::info("wrote {} and the features section of {}", csv, o.md_path);
   return failures ? 1 : 0;
 }
 

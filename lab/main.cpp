@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 
+#include "cli/log.h"
 #include "cli/options.h"
 #include "cli/program.h"
 #include "engine/geometry_io.h"
@@ -32,8 +33,11 @@ int lab_main(int argc, char** argv) {
   auto* features = add_features_command(app, features_opts, argc, argv);
   ValidationOptions laws_opts;
   auto* laws = add_validation_command(app, laws_opts, argc, argv);
+  bool quiet = false, verbose = false;
+  for (CLI::App* command : {bench, features, laws}) add_verbosity_flags(command, quiet, verbose);
 
   if (const int rc = parse_command_line("grains-lab", app, argc, argv); rc >= 0) return rc;
+  set_log_level(quiet, verbose);
 
   return report_errors("grains-lab", [&]() -> int {
     if (bench->parsed()) return run_bench(bench_opts);

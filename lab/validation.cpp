@@ -2,6 +2,7 @@
 // bench/validation/README.md.
 #include "lab/validation.h"
 
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -201,6 +202,7 @@ CollapseResult run_collapse(const std::string& scene, double aspect, int radius_
   Simulation sim(g, threads);
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
+    spdlog::debug("  frame {}: {}", f, frame_detail(sim.object(0).stats));
     const ParticleStore& pts = sim.object(0).pts;
     if (f == 1) {
       res.grains = pts.size();
@@ -243,6 +245,7 @@ SiloResult run_silo(const std::string& scene, int orifice_grains, const SiloSize
   std::vector<double> t, n;
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
+    spdlog::debug("  frame {}: {}", f, frame_detail(sim.object(0).stats));
     const ParticleStore& pts = sim.object(0).pts;
     double time = f / g.fps;
     if (f == 1) res.grains = pts.size();
@@ -355,6 +358,7 @@ ReposeResult run_repose(const std::string& scene, double friction, const ReposeS
   double y_max = y0 - s.d;  // the pile: grains below the hopper's floor
   for (int f = 1; f <= g.frames; ++f) {
     sim.step_frame();
+    spdlog::debug("  frame {}: {}", f, frame_detail(sim.object(0).stats));
     if (f == earlier) res.slope_earlier = pile_slope(sim.object(0).pts, 0, 0, s.d, y_max);
   }
   const ParticleStore& pts = sim.object(0).pts;
@@ -500,11 +504,10 @@ int run_validation(const ValidationOptions& o) {
       std::vector<CollapseResult> runs;
       for (double a : plan.aspects) {
         CollapseResult r = run_collapse(collapse_scene, a, plan.column_radius_grains, s, threads);
-        std::fprintf(stderr,
-                     "laws %s collapse a=%.3g  %zu grains  R0 %.3g m (measured %.3g)  R_inf %.3g m "
-                     " run-out %.3g  %.1f s\n",
-                     tag.c_str(), r.aspect, r.grains, r.r0, r.r0_measured, r.r_inf, r.runout,
-                     r.seconds);
+        spdlog::info(
+            "laws {} collapse a={:.3g}  {} grains  R0 {:.3g} m (measured {:.3g})  R_inf {:.3g} m "
+            " run-out {:.3g}  {:.1f} s",
+            tag, r.aspect, r.grains, r.r0, r.r0_measured, r.r_inf, r.runout, r.seconds);
         runs.push_back(r);
       }
       std::string set = settings_text(s, "R0=" + std::to_string(plan.column_radius_grains) + "d");
@@ -573,11 +576,10 @@ int run_validation(const ValidationOptions& o) {
       std::vector<SiloResult> runs;
       for (int od : plan.orifices) {
         SiloResult r = run_silo(silo_scene, od, plan.silo, s, threads);
-        std::fprintf(stderr,
-                     "laws %s silo D=%dd  %zu grains  rate %.4g /s (halves %.4g, %.4g)  drained "
-                     "%.2f  %.1f s\n",
-                     tag.c_str(), od, r.grains, r.rate, r.rate_first, r.rate_second, r.drained,
-                     r.seconds);
+        spdlog::info(
+            "laws {} silo D={}d  {} grains  rate {:.4g} /s (halves {:.4g}, {:.4g})  drained "
+            "{:.2f}  {:.1f} s",
+            tag, od, r.grains, r.rate, r.rate_first, r.rate_second, r.drained, r.seconds);
         runs.push_back(r);
       }
       BeverlooFit f = fit_beverloo(runs, s.d);
@@ -651,11 +653,10 @@ int run_validation(const ValidationOptions& o) {
       std::vector<ReposeResult> runs;
       for (double mu : plan.frictions) {
         ReposeResult r = run_repose(pile_scene, mu, plan.pile, s, threads);
-        std::fprintf(
-            stderr,
-            "laws %s repose mu=%.3g  %zu grains (%zu in the hopper)  angle %.3g deg (spread %.2g, "
-            "%d sectors; 1 s earlier %.3g)  height %.3g m  radius %.3g m  %.1f s\n",
-            tag.c_str(), mu, r.grains, r.left_in_hopper, r.slope.angle_deg, r.slope.spread_deg,
+        spdlog::info(
+            "laws {} repose mu={:.3g}  {} grains ({} in the hopper)  angle {:.3g} deg (spread "
+            "{:.2g}, {} sectors; 1 s earlier {:.3g})  height {:.3g} m  radius {:.3g} m  {:.1f} s",
+            tag, mu, r.grains, r.left_in_hopper, r.slope.angle_deg, r.slope.spread_deg,
             r.slope.sectors, r.slope_earlier.angle_deg, r.slope.height, r.slope.radius, r.seconds);
         runs.push_back(r);
       }
@@ -768,7 +769,7 @@ int run_validation(const ValidationOptions& o) {
          << num(r.seconds) << " |\n";
     md << "\n## Measurements\n\n" << detail.str();
   }
-  std::fprintf(stderr, "wrote %s and %s\n", csv.c_str(), o.md_path.c_str());
+  spdlog::info("wrote {} and {}", csv, o.md_path);
   return 0;
 }
 

@@ -166,10 +166,12 @@ struct RenderOptions {
   int threads = 0;        // 0: OpenMP's default
   int sheet_frames = 12;  // thumbnails on the contact sheet
   bool flat = false;      // flat colours: no lighting or occlusion
-  bool quiet = false;
+  bool quiet = false;    // errors and warnings only
+  bool verbose = false;  // also a line a frame
 };
 
 // Renders the folder; returns the exit code (0 ok, 2 bad input, 1 failure while rendering).
+// Sets the log level (cli/log.h) from quiet and verbose; messages go to stderr.
 int render_command(const RenderOptions& opts);
 
 // Adds the `render` subcommand's arguments to a CLI11 app, bound to `opts`.

@@ -3,6 +3,7 @@
 // the same from frame to frame; the second renders each frame to PNG, feeds the video and keeps
 // the contact sheet's thumbnails.
 #include <omp.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -20,6 +21,7 @@
 #include <set>
 #include <sstream>
 
+#include "cli/log.h"
 #include "cli/options.h"
 #include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
@@ -404,10 +406,10 @@ int run(const RenderOptions& opts) {
                      "recorded, and " + colliders.missing.front() + " does not exist (frames "
                      "written before runs recorded collider poses, or not by `grains run`): run "
                      "the graph again to draw them, or leave out --graph");
-    std::fprintf(stderr,
-                 "grains render: warning: %s does not exist (frames written before runs recorded "
-                 "collider poses, or not by `grains run`): its colliders are not drawn\n",
-                 colliders.missing.front().c_str());
+    spdlog::warn(
+        "grains render: warning: {} does not exist (frames written before runs recorded "
+        "collider poses, or not by `grains run`): its colliders are not drawn",
+        colliders.missing.front());
   }
   if (opts.fps > 0) fps = opts.fps;
 
@@ -460,9 +462,12 @@ int run(const RenderOptions& opts) {
   std::vector<int> thumb_numbers;
   double read_ms = 0, render_ms = 0, write_ms = 0;
   size_t next_pick = 0;
+  const bool bar =
+      isatty(fileno(stderr)) && spdlog::should_log(spdlog::level::info) && !log_verbose();
   for (size_t k = 0; k < frames.size(); ++k) {
     const FrameFiles& f = frames[k];
-    auto t0 = clock::now();
+    const auto t_frame = clock::now();
+    auto t0 = t_frame;
     std::vector<ParticleStore> objs = read_objects(f);
     read_ms += ms_since(t0);
 
@@ -492,57 +497,57 @@ int run(const RenderOptions& opts) {
     write_png((fs::path(out) / name).string(), img);
     if (video) video->add(img);
     write_ms += ms_since(t0);
-    if (!opts.quiet && isatty(fileno(stderr)))
+    // the count on a terminal is redrawn in place with '\r', so it is written to stderr directly
+    // (spdlog ends every message with a newline); --verbose logs a line a frame instead
+    if (bar)
       std::fprintf(stderr, "\rrender: frame %d (%zu/%zu)   ", f.number, k + 1, frames.size());
+    spdlog::debug("render: frame {} ({}/{}): {} grains in {:.0f} ms", f.number, k + 1,
+                  frames.size(), points, ms_since(t_frame));
   }
-  if (!opts.quiet && isatty(fileno(stderr))) std::fputc('\n', stderr);
+  if (bar) std::fputc('\n', stderr);
   if (!colliders.frames_without.empty()) {
     const size_t more = colliders.frames_without.size() - 1;
-    std::fprintf(stderr,
-                 "grains render: warning: %s has no collider poses for frame %d%s: drawn without "
-                 "colliders\n",
-                 kColliderPosesFile, colliders.frames_without.front(),
-                 more ? (" and " + std::to_string(more) + " more").c_str() : "");
+    spdlog::warn(
+        "grains render: warning: {} has no collider poses for frame {}{}: drawn without colliders",
+        kColliderPosesFile, colliders.frames_without.front(),
+        more ? " and " + std::to_string(more) + " more" : "");
   }
   const std::string sheet_path = (fs::path(out) / "contact_sheet.png").string();
   write_png(sheet_path, contact_sheet(thumbs, thumb_numbers, W, H));
   if (video) video->finish();
 
-  if (!opts.quiet) {
-    const double n = static_cast<double>(frames.size());
-    std::fprintf(
-        stderr,
-        "render: %zu frames of %dx%d (up to %zu grains) in %.2f s: survey %.0f ms, per frame "
-        "%.0f ms read + %.0f ms render + %.0f ms write, %d threads\n",
-        frames.size(), W, H, sv.max_points, ms_since(t_start) / 1000.0, survey_ms, read_ms / n,
-        render_ms / n, write_ms / n, omp_get_max_threads());
-    if (!opts.color_by.empty())
-      std::fprintf(stderr, "render: %s from %s to %s over all frames\n", opts.color_by.c_str(),
-                   format_value(settings.color_by.min).c_str(),
-                   format_value(settings.color_by.max).c_str());
-    std::fprintf(stderr, "render: frames in %s\nrender: contact sheet %s\n", out.c_str(),
-                 sheet_path.c_str());
-    if (video) std::fprintf(stderr, "render: video %s\n", opts.video.c_str());
-  }
+  const double n = static_cast<double>(frames.size());
+  spdlog::info(
+      "render: {} frames of {}x{} (up to {} grains) in {:.2f} s: survey {:.0f} ms, per frame "
+      "{:.0f} ms read + {:.0f} ms render + {:.0f} ms write, {} threads",
+      frames.size(), W, H, sv.max_points, ms_since(t_start) / 1000.0, survey_ms, read_ms / n,
+      render_ms / n, write_ms / n, omp_get_max_threads());
+  if (!opts.color_by.empty())
+    spdlog::info("render: {} from {} to {} over all frames", opts.color_by,
+                 format_value(settings.color_by.min), format_value(settings.color_by.max));
+  spdlog::info("render: frames in {}", out);
+  spdlog::info("render: contact sheet {}", sheet_path);
+  if (video) spdlog::info("render: video {}", opts.video);
   return kOk;
 }
 
 }  // namespace
 
 int render_command(const RenderOptions& opts) {
+  set_log_level(opts.quiet, opts.verbose);
   try {
     return run(opts);
   } catch (const BadInput& e) {
-    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    spdlog::error("grains render: error: {}", e.what());
     return kBadInput;
   } catch (const LoadError& e) {
-    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    spdlog::error("grains render: error: {}", e.what());
     return kBadInput;
   } catch (const GeometryError& e) {
-    std::fprintf(stderr, "grains render: error: %s\n", e.what());
+    spdlog::error("grains render: error: {}", e.what());
     return kBadInput;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "grains render: failed: %s\n", e.what());
+    spdlog::error("grains render: failed: {}", e.what());
     return kRunFailure;
   }
 }
@@ -578,7 +583,7 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
       ->check(CLI::Range(1, 64));
   r->add_flag("--flat", o.flat,
               "flat colours (exactly the colour bar's), no lighting or occlusion");
-  r->add_flag("--quiet", o.quiet, "print nothing but errors");
+  add_verbosity_flags(r, o.quiet, o.verbose);
   return r;
 }
 

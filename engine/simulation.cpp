@@ -58,16 +58,12 @@ Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads
       objects_per_node_[k]++;
     }
 
-    const ParamValue* cl = nullptr;
-    auto it = graph_.nodes[solver].params.find("colliders");
-    if (it != graph_.nodes[solver].params.end()) cl = &it->second;
-    if (cl)
-      for (const auto& name : cl->list) {
-        int ci = graph_.find(name);
-        obj->collider_nodes.push_back(ci);
-        obj->collider_params.emplace_back(graph_.nodes[ci].info->params, graph_.nodes[ci].params);
-        objects_per_node_[ci]++;
-      }
+    for (const auto& name : SolverParams::read(obj->chain.back().params).colliders) {
+      int ci = graph_.find(name);
+      obj->collider_nodes.push_back(ci);
+      obj->collider_params.emplace_back(graph_.nodes[ci].info->params, graph_.nodes[ci].params);
+      objects_per_node_[ci]++;
+    }
     obj->colliders.resize(obj->collider_nodes.size());
     objects_.push_back(std::move(obj));
   }
@@ -226,16 +222,16 @@ void Simulation::step_object(SimObject& obj) {
   ChainNode& solver_entry = obj.chain.back();
   checked(obj.solver,
           [&] { solver_entry.params.evaluate(vars_for(obj, obj.solver, frame_ / graph_.fps)); });
-  const ParamSet& sp = solver_entry.params;
-  const int base = std::max(1, sp.i("substeps"));
-  bool control = sp.b("error_control");
+  const SolverParams sp = SolverParams::read(solver_entry.params);
+  const int base = std::max(1, sp.substeps);
+  bool control = sp.error_control;
   if (control) {  // only chains with a node that reports its error (a grains node)
     bool reports = false;
     for (const auto& c : obj.chain) reports = reports || graph_.nodes[c.node].info->reports_error;
     control = reports;
   }
-  const int most = std::max(base, sp.i("max_substeps"));
-  const float tolerance = static_cast<float>(sp.f("error_tolerance"));
+  const int most = std::max(base, sp.max_substeps);
+  const float tolerance = static_cast<float>(sp.error_tolerance);
   // the first frame starts as fine as allowed: before the chain has run nothing is known of the
   // grains' loads, and a first substep as long as a frame can crush a column by several radii
   if (control && obj.substeps == 0) obj.substeps = refine_to(base, most, most);

@@ -14,6 +14,7 @@
 
 #include "engine/graph.h"
 #include "engine/node.h"
+#include "engine/param_rows.h"
 #include "engine/state_stream.h"
 
 namespace grains {
@@ -55,6 +56,20 @@ constexpr float kCoarsestResolution = 0.1f;
 constexpr float kWarnResolution = 1e-3f;
 // The largest distance from the origin at which floats resolve `fraction` of radius r.
 double precise_reach(float r, float fraction);
+
+// The solver node's parameters (engine/param_rows.h): nodes/solver.cpp registers them with the
+// node, and the evaluator, which runs each solver's substeps, reads them.
+#define SOLVER_PARAMS(ROW)                                                                       \
+  ROW(INT, substeps, 1, .at_least(1),                                                           \
+      "substeps per frame, dt = 1 / (fps * substeps); with error control the fewest")           \
+  ROW(TOGGLE, error_control, true, ,                                                            \
+      "pick the substeps each frame to keep the grains' error under error_tolerance")           \
+  ROW(INT, max_substeps, 256, .at_least(1), "most substeps per frame error control may take")   \
+  ROW(FLOAT, error_tolerance, 0.0025, .positive(),                                              \
+      "error control's bound on the mean overlap of touching grains, as a fraction "            \
+      "of their summed radii (a resting column's relative loss of height)")                     \
+  ROW(LIST, colliders, {}, , "names of collider nodes this object collides with")
+GR_NODE_PARAMS(SolverParams, SOLVER_PARAMS)
 
 // One chain entry: a node instance with its parameters, evaluated per substep.
 struct ChainNode {

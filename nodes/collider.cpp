@@ -2,41 +2,51 @@
 // may animate. Solvers list colliders by name; the evaluator poses them every substep, and the
 // pose a substep earlier gives the surface velocity.
 #include "engine/node.h"
+#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
+namespace {
+
+// the node's parameters (engine/param_rows.h); shape's menu is in ShapeKind's order
+#define COLLIDER_PARAMS(ROW)                                                                    \
+  ROW(MENU, shape, 0, .menu_of({"plane", "box", "sphere", "torus", "capsule"}),                 \
+      "plane (y = 0, solid below, before the transform), box, sphere, torus (in xz), capsule (along y)") \
+  ROW(VECTOR, size, (1, 1, 1), .unit("m"), "full extents of the box")                           \
+  ROW(FLOAT, radius, 0.5, .positive().unit("m"), "sphere and capsule radius; torus ring radius") \
+  ROW(FLOAT, tube, 0.1, .positive().unit("m"), "torus tube radius")                             \
+  ROW(FLOAT, height, 1, .at_least(0).unit("m"), "capsule length between hemisphere centres")   \
+  ROW(VECTOR, normal, (0, 1, 0), ,                                                              \
+      "plane normal (before rotate); the plane passes through translate")                       \
+  ROW(VECTOR, translate, (0, 0, 0), .unit("m"), "translation")                                  \
+  ROW(VECTOR, rotate, (0, 0, 0), .unit("deg"), "rotation about x, then y, then z")              \
+  ROW(FLOAT, scale, 1, .positive(), "uniform scale")                                            \
+  ROW(FLOAT, bounce, 0.5, .range(0, 1), "restitution of the solver's response (non-grains points)") \
+  ROW(FLOAT, friction, 0.5, .at_least(0),                                                       \
+      "Coulomb friction of the solver's response (non-grains points)")
+GR_NODE_PARAMS(ColliderParams, COLLIDER_PARAMS)
+
+}  // namespace
 
 void register_collider_node() {
   NodeTypeInfo t;
   t.type = "collider";
   t.doc = "A collision shape with an animatable transform, referenced by solvers' `colliders`.";
   t.role = NodeRole::Collider;
-  t.params = {
-      ParamDecl::Menu("shape", {"plane", "box", "sphere", "torus", "capsule"}, "plane",
-                      "plane (y = 0, solid below, before the transform), box, sphere, torus (in xz), capsule (along y)"),
-      ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box").unit("m"),
-      ParamDecl::Float("radius", 0.5, "sphere and capsule radius; torus ring radius").positive().unit("m"),
-      ParamDecl::Float("tube", 0.1, "torus tube radius").positive().unit("m"),
-      ParamDecl::Float("height", 1, "capsule length between hemisphere centres").at_least(0).unit("m"),
-      ParamDecl::Vector("normal", {0, 1, 0}, "plane normal (before rotate); the plane passes through translate"),
-      ParamDecl::Vector("translate", {0, 0, 0}, "translation").unit("m"),
-      ParamDecl::Vector("rotate", {0, 0, 0}, "rotation about x, then y, then z").unit("deg"),
-      ParamDecl::Float("scale", 1, "uniform scale").positive(),
-      ParamDecl::Float("bounce", 0.5, "restitution of the solver's response (non-grains points)").range(0, 1),
-      ParamDecl::Float("friction", 0.5, "Coulomb friction of the solver's response (non-grains points)").at_least(0),
-  };
-  t.collider = [](const ParamSet& p, ColliderState& c) {
-    c.shape.kind = static_cast<ShapeKind>(p.choice("shape"));  // the menu is in ShapeKind's order
-    c.shape.size = p.v3("size");
-    c.shape.radius = static_cast<float>(p.f("radius"));
-    c.shape.tube = static_cast<float>(p.f("tube"));
-    c.shape.height = static_cast<float>(p.f("height"));
-    c.bounce = static_cast<float>(p.f("bounce"));
-    c.friction = static_cast<float>(p.f("friction"));
-    Pose pose = Pose::from_trs(p.v3("translate"), p.v3("rotate"), static_cast<float>(p.f("scale")));
+  t.params = ColliderParams::decls();
+  t.collider = [](const ParamSet& params, ColliderState& c) {
+    const ColliderParams p = ColliderParams::read(params);
+    c.shape.kind = static_cast<ShapeKind>(p.shape.index);
+    c.shape.size = p.size;
+    c.shape.radius = static_cast<float>(p.radius);
+    c.shape.tube = static_cast<float>(p.tube);
+    c.shape.height = static_cast<float>(p.height);
+    c.bounce = static_cast<float>(p.bounce);
+    c.friction = static_cast<float>(p.friction);
+    Pose pose = Pose::from_trs(p.translate, p.rotate, static_cast<float>(p.scale));
     if (c.shape.kind == ShapeKind::Plane) {
       // turn local +y onto the normal, then apply the transform's rotation
-      Vec3 n = normalized(p.v3("normal"));
+      Vec3 n = normalized(p.normal);
       Vec3 y{0, 1, 0};
       Vec3 axis = cross(y, n);
       float s = length(axis), co = dot(y, n);
@@ -62,7 +72,9 @@ void register_collider_node() {
     c.pose = pose;
   };
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
-    if (p.s("shape") == "plane" && length(p.v3("normal")) == 0 && !p.is_animated("normal"))
+    const ColliderParams q = ColliderParams::read(p);
+    if (q.shape == static_cast<int>(ShapeKind::Plane) && length(q.normal) == 0 &&
+        !p.is_animated("normal"))
       return {"the plane normal must not be zero", "normal"};
     return {"", ""};
   };

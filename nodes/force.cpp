@@ -1,20 +1,32 @@
 // force: adds a uniform force and drag to the `force` attribute of the stream's points.
 #include "engine/node.h"
+#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
 namespace {
 
+// the node's parameters (engine/param_rows.h)
+#define FORCE_PARAMS(ROW)                                                                     \
+  ROW(FLOAT, activation, 1, , "the node acts only while this is greater than 0")             \
+  ROW(STRING, group, "", , "act only on this point group (empty: the whole stream)")          \
+  ROW(VECTOR, force, (0, 0, 0), .unit("N"), "uniform force")                                  \
+  ROW(TOGGLE, ignore_mass, false, ,                                                           \
+      "multiply force and drag by each point's mass, so `force` is an acceleration (gravity)") \
+  ROW(FLOAT, drag, 0, .at_least(0).unit("kg/s"), "drag coefficient: force -= drag * (v - wind)") \
+  ROW(VECTOR, wind, (0, 0, 0), .unit("m/s"), "velocity drag pulls towards")
+GR_NODE_PARAMS(ForceParams, FORCE_PARAMS)
+
 class ForceNode : public Node {
  public:
   void cook(CookContext& ctx) override {
-    const ParamSet& p = ctx.params;
-    if (p.f("activation") <= 0) return;
+    const ForceParams p = ForceParams::read(ctx.params);
+    if (p.activation <= 0) return;
     ParticleStore& s = ctx.pts;
-    Vec3 force = p.v3("force"), wind = p.v3("wind");
-    float drag = static_cast<float>(p.f("drag"));
-    bool per_mass = p.b("ignore_mass");
-    const std::string& group = p.s("group");
+    Vec3 force = p.force, wind = p.wind;
+    float drag = static_cast<float>(p.drag);
+    bool per_mass = p.ignore_mass;
+    const std::string& group = p.group;
     float* F = s.v3("force");
     const float* v = s.v3("v");
     const float* m = s.f("mass");
@@ -36,15 +48,7 @@ void register_force_node() {
   NodeTypeInfo t;
   t.type = "force";
   t.doc = "Adds a uniform force and drag towards a wind velocity.";
-  t.params = {
-      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
-      ParamDecl::String("group", "", "act only on this point group (empty: the whole stream)"),
-      ParamDecl::Vector("force", {0, 0, 0}, "uniform force").unit("N"),
-      ParamDecl::Toggle("ignore_mass", false,
-                        "multiply force and drag by each point's mass, so `force` is an acceleration (gravity)"),
-      ParamDecl::Float("drag", 0, "drag coefficient: force -= drag * (v - wind)").at_least(0).unit("kg/s"),
-      ParamDecl::Vector("wind", {0, 0, 0}, "velocity drag pulls towards").unit("m/s"),
-  };
+  t.params = ForceParams::decls();
   t.make = [] { return std::make_unique<ForceNode>(); };
   register_node_type(std::move(t));
 }

@@ -4,6 +4,7 @@
 
 #include "engine/node.h"
 #include "nodes/common.h"
+#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -13,6 +14,22 @@ namespace {
 enum Rule { kRuleBox, kRuleSphere, kRuleAttribute };
 enum Compare { kLess, kLessEqual, kGreater, kGreaterEqual, kEqual, kNotEqual };
 enum Operation { kReplace, kAdd, kIntersect, kSubtract };
+
+// the node's parameters (engine/param_rows.h)
+#define GROUP_PARAMS(ROW)                                                                   \
+  ROW(FLOAT, activation, 1, , "the node acts only while this is greater than 0")           \
+  ROW(STRING, group_name, "group1", , "name of the point group")                            \
+  ROW(MENU, rule, kRuleBox, .menu_of({"box", "sphere", "attribute"}), "membership test")    \
+  ROW(VECTOR, center, (0, 0, 0), .unit("m"), "centre of the box or sphere")                 \
+  ROW(VECTOR, size, (1, 1, 1), .unit("m"), "full extents of the box")                       \
+  ROW(FLOAT, radius, 0.5, .positive().unit("m"), "radius of the sphere")                    \
+  ROW(STRING, attribute, "", , "attribute compared (vector components as NAME_x)")          \
+  ROW(MENU, compare, kGreater, .menu_of({"<", "<=", ">", ">=", "==", "!="}),                \
+      "comparison with `value`")                                                            \
+  ROW(FLOAT, value, 0, , "value the attribute is compared with")                            \
+  ROW(MENU, operation, kReplace, .menu_of({"replace", "add", "intersect", "subtract"}),     \
+      "how the test combines with existing membership")
+GR_NODE_PARAMS(GroupParams, GROUP_PARAMS)
 
 bool compare(int op, double a, double b) {
   switch (op) {
@@ -28,18 +45,18 @@ bool compare(int op, double a, double b) {
 class GroupNode : public Node {
  public:
   void cook(CookContext& ctx) override {
-    const ParamSet& p = ctx.params;
-    if (p.f("activation") <= 0) return;
+    const GroupParams p = GroupParams::read(ctx.params);
+    if (p.activation <= 0) return;
     ParticleStore& s = ctx.pts;
-    const std::string& name = p.s("group_name");
-    const int rule = p.choice("rule"), op = p.choice("operation"), cmp = p.choice("compare");
+    const std::string& name = p.group_name;
+    const int rule = p.rule, op = p.operation, cmp = p.compare;
     const Region region = rule == kRuleSphere ? Region::Sphere : Region::Box;
     int32_t* g = s.i(group_attribute(name));
     const float* P = s.v3("P");
     const Attribute* attr = nullptr;
     int comp = 0;
     if (rule == kRuleAttribute) {
-      std::string an = p.s("attribute");
+      std::string an = p.attribute;
       auto us = an.rfind('_');
       attr = s.find(an);
       if (!attr && us != std::string::npos && an.size() == us + 2) {  // NAME_x, NAME_y, NAME_z
@@ -49,9 +66,9 @@ class GroupNode : public Node {
       }
       if (!attr) return;  // no point has the attribute yet: nothing matches
     }
-    Vec3 c = p.v3("center"), size = p.v3("size");
-    float radius = static_cast<float>(p.f("radius"));
-    double value = p.f("value");
+    Vec3 c = p.center, size = p.size;
+    float radius = static_cast<float>(p.radius);
+    double value = p.value;
     for (uint32_t k : ctx.members) {
       bool hit;
       if (rule == kRuleAttribute) {
@@ -76,29 +93,18 @@ void register_group_node() {
   NodeTypeInfo t;
   t.type = "group";
   t.doc = "Puts points into a named group by region or attribute comparison, every substep.";
-  t.params = {
-      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
-      ParamDecl::String("group_name", "group1", "name of the point group"),
-      ParamDecl::Menu("rule", {"box", "sphere", "attribute"}, "box", "membership test"),
-      ParamDecl::Vector("center", {0, 0, 0}, "centre of the box or sphere").unit("m"),
-      ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box").unit("m"),
-      ParamDecl::Float("radius", 0.5, "radius of the sphere").positive().unit("m"),
-      ParamDecl::String("attribute", "", "attribute compared (vector components as NAME_x)"),
-      ParamDecl::Menu("compare", {"<", "<=", ">", ">=", "==", "!="}, ">", "comparison with `value`"),
-      ParamDecl::Float("value", 0, "value the attribute is compared with"),
-      ParamDecl::Menu("operation", {"replace", "add", "intersect", "subtract"}, "replace",
-                      "how the test combines with existing membership"),
-  };
+  t.params = GroupParams::decls();
   t.make = [] { return std::make_unique<GroupNode>(); };
-  t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
-    if (std::string bad = group_name_problem(p.s("group_name")); !bad.empty())
+  t.check = [](const ParamSet& params, const std::string&) -> std::pair<std::string, std::string> {
+    const GroupParams p = GroupParams::read(params);
+    if (std::string bad = group_name_problem(p.group_name); !bad.empty())
       return {bad, "group_name"};
-    if (p.choice("rule") == kRuleAttribute && p.s("attribute").empty())
+    if (p.rule == kRuleAttribute && p.attribute.empty())
       return {"rule \"attribute\" needs an `attribute`", "attribute"};
     return {"", ""};
   };
   t.adds_attributes = [](const ParamSet& p) {
-    return std::vector<std::string>{group_attribute(p.s("group_name"))};
+    return std::vector<std::string>{group_attribute(GroupParams::read(p).group_name)};
   };
   register_node_type(std::move(t));
 }

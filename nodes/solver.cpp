@@ -13,6 +13,7 @@
 #include <cmath>
 
 #include "engine/node.h"
+#include "engine/simulation.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -99,19 +100,7 @@ void register_solver_node() {
   t.type = "solver";
   t.doc = "Ends a chain: one particle object; runs its chain each substep and moves non-grains points.";
   t.role = NodeRole::Solver;
-  t.params = {
-      ParamDecl::Int("substeps", 1,
-                     "substeps per frame, dt = 1 / (fps * substeps); with error control the fewest")
-          .at_least(1),
-      ParamDecl::Toggle("error_control", true,
-                        "pick the substeps each frame to keep the grains' error under error_tolerance"),
-      ParamDecl::Int("max_substeps", 256, "most substeps per frame error control may take").at_least(1),
-      ParamDecl::Float("error_tolerance", 0.0025,
-                       "error control's bound on the mean overlap of touching grains, as a fraction "
-                       "of their summed radii (a resting column's relative loss of height)")
-          .positive(),
-      ParamDecl::List("colliders", "names of collider nodes this object collides with"),
-  };
+  t.params = SolverParams::decls();  // engine/simulation.h: the evaluator reads them
   t.make = [] { return std::make_unique<SolverNode>(); };
   register_node_type(std::move(t));
 }

@@ -21,6 +21,7 @@
 #include "engine/node.h"
 #include "engine/state_stream.h"
 #include "nodes/common.h"
+#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -38,25 +39,59 @@ enum Shape { kBox, kSphere, kGrid, kFile, kImage };
 enum Emission { kOnce, kRate };
 enum Packing { kCubic, kHexagonal };
 
+// the node's parameters (engine/param_rows.h)
+#define SOURCE_PARAMS(ROW)                                                                          \
+  ROW(FLOAT, activation, 1, , "the node emits only while this is greater than 0")                  \
+  ROW(MENU, shape, kBox, .menu_of({"box", "sphere", "grid", "file", "image"}),                      \
+      "what to fill: a box, a sphere, a one-layer grid in the xz plane, the points of `file`, or a " \
+      "sheet in the xz plane (size x, z) from the PNG mask `file`")                                 \
+  ROW(VECTOR, center, (0, 0, 0), .unit("m"), "centre of the shape; offset added to file points")   \
+  ROW(VECTOR, size, (1, 1, 1), .unit("m"), "full extents of the box or grid")                       \
+  ROW(FLOAT, radius, 0.5, .positive().unit("m"), "radius of the sphere")                            \
+  ROW(STRING, file, "", ,                                                                           \
+      "PLY or OBJ file of points (shape \"file\") or PNG mask (shape \"image\"), relative to the graph") \
+  ROW(FLOAT, threshold, 0.5, .range(0, 1),                                                          \
+      "image: a grain where the pixel block's alpha (or luminance) exceeds this")                   \
+  ROW(FLOAT, connect_radius, 0, .at_least(0),                                                       \
+      "connect each new grain to those of the same emission within this times the separation "     \
+      "(0: none; image: 1.5, edges and diagonals)")                                                 \
+  ROW(FLOAT, separation, 0.1, .positive().unit("m"), "distance between neighbouring grains")        \
+  ROW(MENU, packing, kCubic, .menu_of({"grid", "hexagonal"}), "cubic grid or hexagonal close packing") \
+  ROW(FLOAT, jitter, 0, .range(0, 1), "random offset of each grain, as a fraction of the separation") \
+  ROW(MENU, emission, kOnce, .menu_of({"once", "rate"}),                                            \
+      "emit the whole fill once at `birth_frame`, or random points at `rate`")                     \
+  ROW(INT, birth_frame, 1, .at_least(1), "frame of the one-time emission")                          \
+  ROW(FLOAT, rate, 100, .at_least(0).unit("1/s"), "grains per second while emitting at a rate")     \
+  ROW(INT, start_frame, 1, .at_least(1), "first frame of rate emission")                            \
+  ROW(INT, end_frame, 1000000, .at_least(1), "last frame of rate emission")                         \
+  ROW(VECTOR, velocity, (0, 0, 0), .unit("m/s"), "initial velocity")                                \
+  ROW(FLOAT, pscale, 0, .at_least(0).unit("m"), "grain radius; 0 means separation/2")               \
+  ROW(FLOAT, density, 0, .at_least(0).unit("kg/m^3"),                                               \
+      "mass = density * 4/3 pi pscale^3 when greater than 0")                                       \
+  ROW(FLOAT, mass, 1, .positive().unit("kg"), "mass of each grain when density is 0")               \
+  ROW(STRING, group, "", , "also put the new grains in this group")
+GR_NODE_PARAMS(SourceParams, SOURCE_PARAMS)
+
 class SourceNode : public Node {
  public:
   void cook(CookContext& ctx) override {
-    const ParamSet& p = ctx.params;
-    if (p.f("activation") <= 0) return;
-    if (p.choice("emission") == kOnce) {
-      if (emitted_ || ctx.time.frame != p.i("birth_frame") || ctx.time.substep != 0) return;
+    p_ = SourceParams::read(ctx.params);
+    const SourceParams& p = p_;
+    if (p.activation <= 0) return;
+    if (p.emission == kOnce) {
+      if (emitted_ || ctx.time.frame != p.birth_frame || ctx.time.substep != 0) return;
       emitted_ = true;
       std::vector<Vec3> pts = fill(ctx);
       size_t first = ctx.pts.size();
       emit(ctx, pts);
-      if (p.choice("shape") == kFile) copy_file_attributes(ctx, first);
+      if (p.shape == kFile) copy_file_attributes(ctx, first);
       connect(ctx, first);
     } else {  // rate
       int f = ctx.time.frame;
-      if (f < p.i("start_frame") || f > p.i("end_frame")) return;
-      carry_ += p.f("rate") * ctx.time.dt;
+      if (f < p.start_frame || f > p.end_frame) return;
+      carry_ += p.rate * ctx.time.dt;
       check_point_budget(ctx.node_name, std::floor(carry_), ctx.pts.size(), ctx.max_points,
-                         "emitting " + count_text(p.f("rate")) + " grains a second");
+                         "emitting " + count_text(p.rate) + " grains a second");
       int count = static_cast<int>(std::floor(carry_));
       carry_ -= count;
       std::vector<Vec3> pts;
@@ -85,9 +120,9 @@ class SourceNode : public Node {
  private:
   // Points filling the shape at the separation; grid or hexagonal close packing.
   std::vector<Vec3> fill(CookContext& ctx) {
-    const ParamSet& p = ctx.params;
-    const int shape = p.choice("shape");
-    Vec3 c = p.v3("center");
+    const SourceParams& p = p_;
+    const int shape = p.shape;
+    Vec3 c = p.center;
     std::vector<Vec3> out;
     if (shape == kFile) {
       file_ = read_ply_or_obj(ctx);
@@ -97,11 +132,11 @@ class SourceNode : public Node {
       for (size_t k = 0; k < file_.size(); ++k) out.push_back(load3(P, k) + c);
       return out;
     }
-    float s = static_cast<float>(p.f("separation"));
-    Vec3 size = p.v3("size");
+    float s = static_cast<float>(p.separation);
+    Vec3 size = p.size;
     if (shape == kImage) return image_sheet(ctx, c, size, s);
-    float radius = static_cast<float>(p.f("radius"));
-    bool hex = p.choice("packing") == kHexagonal;
+    float radius = static_cast<float>(p.radius);
+    bool hex = p.packing == kHexagonal;
     if (shape == kSphere) size = Vec3{2 * radius, 2 * radius, 2 * radius};
     if (shape == kGrid) size.y = 0;  // a single layer in the xz plane
     // hexagonal close packing: rows offset by s/2, layers by s*sqrt(3)/2 and sqrt(2/3)*s
@@ -111,11 +146,11 @@ class SourceNode : public Node {
     const double cy = shape == kGrid ? 1.0 : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)));
     const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (shape == kGrid ? 1 : 0));
     check_point_budget(ctx.node_name, cx * cy * cz, ctx.pts.size(), ctx.max_points,
-                       "a " + p.s("shape") + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
+                       "a " + p.shape.text + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
                            count_text(cz) + " grains");
     const int nx = static_cast<int>(cx), ny = static_cast<int>(cy), nz = static_cast<int>(cz);
     Vec3 lo = c - Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
-    float jitter = static_cast<float>(p.f("jitter")) * s;
+    float jitter = static_cast<float>(p.jitter) * s;
     uint64_t counter = 0;
     for (int j = 0; j < ny; ++j)
       for (int k = 0; k < nz; ++k)
@@ -142,7 +177,7 @@ class SourceNode : public Node {
   // rows run along +z, columns along +x (viewed from above with +z down the page it reads
   // upright).
   std::vector<Vec3> image_sheet(CookContext& ctx, const Vec3& c, const Vec3& size, float s) {
-    std::string path = resolve_path(ctx.base_dir, ctx.params.s("file"));
+    std::string path = resolve_path(ctx.base_dir, p_.file);
     int w = 0, h = 0, channels = 0;
     if (std::string bad = input_file_problem(path, kMaxGeometryFileBytes); !bad.empty())
       throw GeometryError(path + ": " + bad);
@@ -161,7 +196,7 @@ class SourceNode : public Node {
                        "an image sheet of " + count_text(cx) + " x " + count_text(cz) + " grains");
     const int nx = static_cast<int>(cx), nz = static_cast<int>(cz);
     Vec3 lo = c - Vec3{(nx - 1) * s, 0, (nz - 1) * s} * 0.5f;
-    float threshold = static_cast<float>(ctx.params.f("threshold"));
+    float threshold = static_cast<float>(p_.threshold);
     std::vector<Vec3> out;
     for (int k = 0; k < nz; ++k)
       for (int i = 0; i < nx; ++i) {
@@ -181,12 +216,12 @@ class SourceNode : public Node {
   // connect_radius x separation: restlength = the distance at birth, strength 1, strain 0. A
   // hash grid of that cell size finds the pairs; each pair once, in a fixed order.
   void connect(CookContext& ctx, size_t first) {
-    const ParamSet& p = ctx.params;
-    float factor = static_cast<float>(p.f("connect_radius"));
-    if (factor == 0 && p.choice("shape") == kImage) factor = 1.5f;  // image sheets come connected
+    const SourceParams& p = p_;
+    float factor = static_cast<float>(p.connect_radius);
+    if (factor == 0 && p.shape == kImage) factor = 1.5f;  // image sheets come connected
     ParticleStore& s = ctx.pts;
     const size_t end = s.size();
-    float R = factor * static_cast<float>(p.f("separation"));
+    float R = factor * static_cast<float>(p.separation);
     if (!(R > 0) || end - first < 2) return;
     const float* P = s.v3("P");
     // clamped before the cast and hashed unsigned: a tiny connect_radius makes x / R overflow
@@ -236,23 +271,23 @@ class SourceNode : public Node {
   }
 
   Vec3 random_point(CookContext& ctx) {
-    const ParamSet& p = ctx.params;
-    Vec3 c = p.v3("center");
+    const SourceParams& p = p_;
+    Vec3 c = p.center;
     uint64_t k = 3 * counter_++;
     Vec3 u{rand01(ctx.seed, k), rand01(ctx.seed, k + 1), rand01(ctx.seed, k + 2)};
-    if (p.choice("shape") == kSphere) {  // uniform in the ball by rejection-free radius scaling
-      float r = static_cast<float>(p.f("radius")) * std::cbrt(u.x);
+    if (p.shape == kSphere) {  // uniform in the ball by rejection-free radius scaling
+      float r = static_cast<float>(p.radius) * std::cbrt(u.x);
       float z = 2 * u.y - 1, phi = 2 * static_cast<float>(M_PI) * u.z;
       float q = std::sqrt(std::max(0.0f, 1 - z * z));
       return c + Vec3{q * std::cos(phi), z, q * std::sin(phi)} * r;
     }
-    Vec3 size = p.v3("size");
-    if (p.choice("shape") == kGrid) size.y = 0;
+    Vec3 size = p.size;
+    if (p.shape == kGrid) size.y = 0;
     return c + Vec3{(u.x - 0.5f) * size.x, (u.y - 0.5f) * size.y, (u.z - 0.5f) * size.z};
   }
 
   ParticleStore read_ply_or_obj(CookContext& ctx) {
-    std::string path = resolve_path(ctx.base_dir, ctx.params.s("file"));
+    std::string path = resolve_path(ctx.base_dir, p_.file);
     if (std::filesystem::path(path).extension() == ".ply") return read_ply(path);
     Mesh m = read_mesh(path);
     ParticleStore s;
@@ -264,16 +299,16 @@ class SourceNode : public Node {
 
   void emit(CookContext& ctx, const std::vector<Vec3>& pts) {
     if (pts.empty()) return;
-    const ParamSet& p = ctx.params;
+    const SourceParams& p = p_;
     ParticleStore& s = ctx.pts;
     size_t first = s.add_points(pts.size());
-    float sep = static_cast<float>(p.f("separation"));
-    float r = p.f("pscale") > 0 ? static_cast<float>(p.f("pscale")) : sep * 0.5f;
-    float density = static_cast<float>(p.f("density"));
+    float sep = static_cast<float>(p.separation);
+    float r = p.pscale > 0 ? static_cast<float>(p.pscale) : sep * 0.5f;
+    float density = static_cast<float>(p.density);
     float mass = density > 0 ? density * 4.0f / 3.0f * static_cast<float>(M_PI) * r * r * r
-                             : static_cast<float>(p.f("mass"));
-    Vec3 vel = p.v3("velocity");
-    const std::string& group = p.s("group");
+                             : static_cast<float>(p.mass);
+    Vec3 vel = p.velocity;
+    const std::string& group = p.group;
     float* P = s.v3("P");
     float* v = s.v3("v");
     float* rest = s.v3("rest");
@@ -308,7 +343,7 @@ class SourceNode : public Node {
         std::copy(a.f.begin(), a.f.end(), dst.f.begin() + first * c);
     }
     if (file_.has("v")) {  // the initial velocity adds to the file's
-      Vec3 vel = ctx.params.v3("velocity");
+      Vec3 vel = p_.velocity;
       float* v = s.v3("v");
       for (size_t k = 0; k < file_.size(); ++k) store3(v, first + k, load3(v, first + k) + vel);
     }
@@ -320,6 +355,7 @@ class SourceNode : public Node {
     file_ = ParticleStore();
   }
 
+  SourceParams p_;  // this cook's parameters
   ParticleStore file_;
   bool emitted_ = false;
   double carry_ = 0;
@@ -333,50 +369,25 @@ void register_source_node() {
   t.type = "source";
   t.doc = "Emits grains: fills a shape at a separation or reads points from a file (a stream generator).";
   t.role = NodeRole::Source;
-  t.params = {
-      ParamDecl::Float("activation", 1, "the node emits only while this is greater than 0"),
-      ParamDecl::Menu("shape", {"box", "sphere", "grid", "file", "image"}, "box",
-                      "what to fill: a box, a sphere, a one-layer grid in the xz plane, the points of `file`, or a "
-                      "sheet in the xz plane (size x, z) from the PNG mask `file`"),
-      ParamDecl::Vector("center", {0, 0, 0}, "centre of the shape; offset added to file points").unit("m"),
-      ParamDecl::Vector("size", {1, 1, 1}, "full extents of the box or grid").unit("m"),
-      ParamDecl::Float("radius", 0.5, "radius of the sphere").positive().unit("m"),
-      ParamDecl::String("file", "", "PLY or OBJ file of points (shape \"file\") or PNG mask (shape \"image\"), relative to the graph"),
-      ParamDecl::Float("threshold", 0.5, "image: a grain where the pixel block's alpha (or luminance) exceeds this").range(0, 1),
-      ParamDecl::Float("connect_radius", 0,
-                       "connect each new grain to those of the same emission within this times the separation "
-                       "(0: none; image: 1.5, edges and diagonals)").at_least(0),
-      ParamDecl::Float("separation", 0.1, "distance between neighbouring grains").positive().unit("m"),
-      ParamDecl::Menu("packing", {"grid", "hexagonal"}, "grid", "cubic grid or hexagonal close packing"),
-      ParamDecl::Float("jitter", 0, "random offset of each grain, as a fraction of the separation").range(0, 1),
-      ParamDecl::Menu("emission", {"once", "rate"}, "once",
-                      "emit the whole fill once at `birth_frame`, or random points at `rate`"),
-      ParamDecl::Int("birth_frame", 1, "frame of the one-time emission").at_least(1),
-      ParamDecl::Float("rate", 100, "grains per second while emitting at a rate").at_least(0).unit("1/s"),
-      ParamDecl::Int("start_frame", 1, "first frame of rate emission").at_least(1),
-      ParamDecl::Int("end_frame", 1000000, "last frame of rate emission").at_least(1),
-      ParamDecl::Vector("velocity", {0, 0, 0}, "initial velocity").unit("m/s"),
-      ParamDecl::Float("pscale", 0, "grain radius; 0 means separation/2").at_least(0).unit("m"),
-      ParamDecl::Float("density", 0, "mass = density * 4/3 pi pscale^3 when greater than 0").at_least(0).unit("kg/m^3"),
-      ParamDecl::Float("mass", 1, "mass of each grain when density is 0").positive().unit("kg"),
-      ParamDecl::String("group", "", "also put the new grains in this group"),
-  };
+  t.params = SourceParams::decls();
   t.make = [] { return std::make_unique<SourceNode>(); };
-  t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
-    if (p.choice("shape") == kFile || p.choice("shape") == kImage) {
-      if (p.s("file").empty()) return {"shape \"" + p.s("shape") + "\" needs a `file`", "file"};
-      std::string path = resolve_path(base, p.s("file"));
+  t.check = [](const ParamSet& params, const std::string& base) -> std::pair<std::string, std::string> {
+    const SourceParams p = SourceParams::read(params);
+    if (p.shape == kFile || p.shape == kImage) {
+      if (p.file.empty()) return {"shape \"" + p.shape.text + "\" needs a `file`", "file"};
+      std::string path = resolve_path(base, p.file);
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
     }
-    if (!p.s("group").empty())
-      if (std::string bad = group_name_problem(p.s("group")); !bad.empty()) return {bad, "group"};
+    if (!p.group.empty())
+      if (std::string bad = group_name_problem(p.group); !bad.empty()) return {bad, "group"};
     return {"", ""};
   };
   // its group's attribute; a file's own point attributes are known only once it is read
-  t.adds_attributes = [](const ParamSet& p) {
+  t.adds_attributes = [](const ParamSet& params) {
+    const SourceParams p = SourceParams::read(params);
     std::vector<std::string> out;
-    if (!p.s("group").empty()) out.push_back(group_attribute(p.s("group")));
-    if (p.choice("shape") == kFile) out.push_back("*");
+    if (!p.group.empty()) out.push_back(group_attribute(p.group));
+    if (p.shape == kFile) out.push_back("*");
     return out;
   };
   register_node_type(std::move(t));

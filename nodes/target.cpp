@@ -24,6 +24,7 @@
 #include "engine/node.h"
 #include "engine/state_stream.h"
 #include "nodes/common.h"
+#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -51,14 +52,34 @@ Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3
   return a + ab * (vb * denom) + ac * (vc * denom);
 }
 
+enum Mode { kRest, kSurface };  // mode's menu
+
+// the node's parameters (engine/param_rows.h)
+#define TARGET_PARAMS(ROW)                                                                        \
+  ROW(FLOAT, activation, 1, , "the node acts only while this is greater than 0")                 \
+  ROW(STRING, group, "", , "act only on this point group of the stream (empty: the whole stream)") \
+  ROW(MENU, mode, kRest, .menu_of({"rest", "surface"}),                                           \
+      "rest: targetP = transformed rest position; surface: the closest point on the transformed mesh `file`") \
+  ROW(STRING, file, "", , "PLY or OBJ mesh for mode \"surface\", relative to the graph")           \
+  ROW(VECTOR, translate, (0, 0, 0), .unit("m"), "translation of the target transform")             \
+  ROW(VECTOR, rotate, (0, 0, 0), .unit("deg"), "rotation, XYZ order, about the pivot")             \
+  ROW(VECTOR, scale, (1, 1, 1), , "per-axis scale about the pivot")                               \
+  ROW(FLOAT, uniform_scale, 1, , "uniform scale about the pivot, times `scale`")                  \
+  ROW(VECTOR, pivot, (0, 0, 0), .unit("m"), "centre of rotation and scale")                        \
+  ROW(FLOAT, stiffness, 1, .at_least(0),                                                          \
+      "targetstiffness written on the points when the node owns it (scales the grains node's target_stiffness)") \
+  ROW(FLOAT, weight, 1, .at_least(0),                                                             \
+      "targetweight written on the points when the node owns it (scales the grains node's target_weight)")
+GR_NODE_PARAMS(TargetParams, TARGET_PARAMS)
+
 struct Transform {
   Pose rot;
   Vec3 translate, scale, pivot;
-  explicit Transform(const ParamSet& p)
-      : rot(Pose::from_trs({0, 0, 0}, p.v3("rotate"), 1.0f)),
-        translate(p.v3("translate")),
-        scale(p.v3("scale") * static_cast<float>(p.f("uniform_scale"))),
-        pivot(p.v3("pivot")) {}
+  explicit Transform(const TargetParams& p)
+      : rot(Pose::from_trs({0, 0, 0}, p.rotate, 1.0f)),
+        translate(p.translate),
+        scale(p.scale * static_cast<float>(p.uniform_scale)),
+        pivot(p.pivot) {}
   Vec3 apply(const Vec3& x) const {
     Vec3 d = x - pivot;
     return rot.rotate({d.x * scale.x, d.y * scale.y, d.z * scale.z}) + pivot + translate;
@@ -68,7 +89,7 @@ struct Transform {
 class TargetNode : public Node {
  public:
   void cook(CookContext& ctx) override {
-    if (ctx.params.f("activation") <= 0) return;
+    if (TargetParams::read(ctx.params).activation <= 0) return;
     ParticleStore& s = ctx.pts;
     // the transform at the end of the substep: a copy of the parameters evaluated there
     ParamSet end = ctx.params;
@@ -80,8 +101,8 @@ class TargetNode : public Node {
       v.F = v.SF + 1;
       end.evaluate(v);
     }
-    const ParamSet& p = end;
-    const std::string& group = p.s("group");
+    const TargetParams p = TargetParams::read(end);
+    const std::string& group = p.group;
     const int32_t* g = group.empty() ? nullptr : s.i_if(group_attribute(group));
     if (!group.empty() && !g) return;
 
@@ -90,8 +111,8 @@ class TargetNode : public Node {
       owns_weight_ = !s.has("targetweight");
       first_ = false;
     }
-    const bool surface = p.s("mode") == "surface";
-    if (surface && mesh_.triangles.empty()) mesh_ = read_mesh(resolve_path(ctx.base_dir, p.s("file")));
+    const bool surface = p.mode == kSurface;
+    if (surface && mesh_.triangles.empty()) mesh_ = read_mesh(resolve_path(ctx.base_dir, p.file));
     const Transform X(p);
     if (surface) {
       world_.resize(mesh_.vertices.size());
@@ -112,11 +133,11 @@ class TargetNode : public Node {
     }
     if (owns_stiffness_) {
       float* ts = s.f("targetstiffness");
-      for (uint32_t i : idx_) ts[i] = static_cast<float>(p.f("stiffness"));
+      for (uint32_t i : idx_) ts[i] = static_cast<float>(p.stiffness);
     }
     if (owns_weight_) {
       float* tw = s.f("targetweight");
-      for (uint32_t i : idx_) tw[i] = static_cast<float>(p.f("weight"));
+      for (uint32_t i : idx_) tw[i] = static_cast<float>(p.weight);
     }
   }
 
@@ -163,25 +184,13 @@ void register_target_node() {
   t.type = "target";
   t.doc = "Sets the pin target targetP: each point's rest position through an animated transform, "
           "or the closest point on a mesh surface (grains node target_weight/target_stiffness pull toward it).";
-  t.params = {
-      ParamDecl::Float("activation", 1, "the node acts only while this is greater than 0"),
-      ParamDecl::String("group", "", "act only on this point group of the stream (empty: the whole stream)"),
-      ParamDecl::Menu("mode", {"rest", "surface"}, "rest",
-                      "rest: targetP = transformed rest position; surface: the closest point on the transformed mesh `file`"),
-      ParamDecl::String("file", "", "PLY or OBJ mesh for mode \"surface\", relative to the graph"),
-      ParamDecl::Vector("translate", {0, 0, 0}, "translation of the target transform").unit("m"),
-      ParamDecl::Vector("rotate", {0, 0, 0}, "rotation, XYZ order, about the pivot").unit("deg"),
-      ParamDecl::Vector("scale", {1, 1, 1}, "per-axis scale about the pivot"),
-      ParamDecl::Float("uniform_scale", 1, "uniform scale about the pivot, times `scale`"),
-      ParamDecl::Vector("pivot", {0, 0, 0}, "centre of rotation and scale").unit("m"),
-      ParamDecl::Float("stiffness", 1, "targetstiffness written on the points when the node owns it (scales the grains node's target_stiffness)").at_least(0),
-      ParamDecl::Float("weight", 1, "targetweight written on the points when the node owns it (scales the grains node's target_weight)").at_least(0),
-  };
+  t.params = TargetParams::decls();
   t.make = [] { return std::make_unique<TargetNode>(); };
-  t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
-    if (p.s("mode") == "surface") {
-      if (p.s("file").empty()) return {"mode \"surface\" needs a `file`", "file"};
-      std::string path = resolve_path(base, p.s("file"));
+  t.check = [](const ParamSet& params, const std::string& base) -> std::pair<std::string, std::string> {
+    const TargetParams p = TargetParams::read(params);
+    if (p.mode == kSurface) {
+      if (p.file.empty()) return {"mode \"surface\" needs a `file`", "file"};
+      std::string path = resolve_path(base, p.file);
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
     }
     return {"", ""};

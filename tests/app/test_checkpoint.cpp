@@ -5,7 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <catch2/catch_test_macros.hpp>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <filesystem>
 #include <thread>
@@ -23,7 +23,7 @@ namespace {
 // matching's rest shapes, explicit constraints), pins on the sheet set by a target node (which
 // owns targetstiffness), friction's contact history, the Verlet rows, a collider moving under
 // an expression with collision feedback, and error control's substep count.
-const char* kScene = R"({"grains_graph": 1, "name": "resume", "fps": 24, "frames": 18, "seed": 5,
+const char* kScene = R"JSON({"grains_graph": 1, "name": "resume", "fps": 24, "frames": 18, "seed": 5,
   "nodes": [
   {"name": "pour", "type": "source", "params": {"emission": "rate", "rate": 600,
     "shape": "box", "center": [0, 0.35, 0], "size": [0.12, 0.04, 0.12], "separation": 0.02,
@@ -39,7 +39,7 @@ const char* kScene = R"({"grains_graph": 1, "name": "resume", "fps": 24, "frames
   {"name": "paddle", "type": "collider", "params": {"shape": "box", "size": [0.3, 0.05, 0.05],
     "translate": ["-0.1 + 0.2 * $T", "0.04", "0"]}},
   {"name": "s", "type": "solver", "inputs": ["g"], "params": {"max_substeps": 16, "colliders": ["ground", "paddle"]}}],
-  "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"]}})";
+  "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"]}})JSON";
 
 // The child `grains run ARGS`, killed (SIGKILL) as soon as `dir`'s stats.csv holds `rows`
 // frames; returns the frames it had written, or -1 when it ended by itself first.

@@ -172,6 +172,7 @@ void say_precision(const SimObject& o, int& said) {
 // What `grains run` was asked for on its command line.
 struct RunRequest {
   std::string graph, out;
+  bool graph_given = false;  // named on the command line (an empty name is refused by the loader)
   int frames = 0;  // 0: the graph's
   int threads = 0;
   std::vector<std::string> sets;
@@ -194,7 +195,7 @@ Checkpoint resumed_run(RunRequest& req) {
   };
   namespace fs = std::filesystem;
   std::error_code ec;
-  if (!req.graph.empty() && fs::weakly_canonical(req.graph, ec) != fs::path(rec.graph))
+  if (req.graph_given && fs::weakly_canonical(req.graph, ec) != fs::path(rec.graph))
     refuse("the checkpoint is of another graph than " + req.graph);
   if (!req.sets.empty()) refuse("--set cannot change it");
   if (!req.out.empty()) refuse("--out cannot move it");
@@ -219,7 +220,8 @@ Checkpoint resumed_run(RunRequest& req) {
 int cmd_run(RunRequest req) {
   std::optional<Checkpoint> resume;
   if (!req.resume.empty()) resume.emplace(resumed_run(req));
-  if (req.graph.empty()) throw LoadError("grains run", "", "name a graph file, or --resume DIR");
+  if (!req.graph_given && req.resume.empty())
+    throw LoadError("grains run", "", "a graph is required: name a graph file, or --resume DIR");
   Graph g = load_graph(req.graph, parse_overrides(req.sets));
   if (req.frames > 0) g.frames = req.frames;
   spdlog::debug("graph {}: {} nodes, {} solvers, {} frames at {:g} fps", req.graph, g.nodes.size(),
@@ -415,7 +417,7 @@ int cli_main(int argc, char** argv) {
 
   auto* run = app.add_subcommand("run", "run a graph and write frames and stats.csv");
   RunRequest req;
-  run->add_option("graph", graph_path, "graph file (JSON); none with --resume");
+  auto* graph_opt = run->add_option("graph", graph_path, "graph file (JSON); none with --resume");
   run->add_option("--out", out, "output folder (default: the graph's output.dir)");
   run->add_option("--frames", frames, "number of frames (default: the graph's)")
       ->check(positive_number());
@@ -485,6 +487,7 @@ int cli_main(int argc, char** argv) {
         return kBadInput;
       }
       req.graph = graph_path;
+      req.graph_given = graph_opt->count() > 0;
       req.out = out;
       req.frames = frames;
       req.threads = threads;

@@ -41,15 +41,21 @@ const char* kScene = R"JSON({"grains_graph": 1, "name": "resume", "fps": 24, "fr
   {"name": "s", "type": "solver", "inputs": ["g"], "params": {"max_substeps": 16, "colliders": ["ground", "paddle"]}}],
   "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"]}})JSON";
 
-// The child `grains run ARGS`, killed (SIGKILL) as soon as `dir`'s stats.csv holds `rows`
-// frames; returns the frames it had written, or -1 when it ended by itself first.
-int run_and_kill(const std::string& args, const std::string& dir, int rows) {
+// The child `grains ARGS` (the program itself, no shell between: the kill must reach it),
+// killed (SIGKILL) as soon as `dir`'s stats.csv holds `rows` frames; returns the frames it had
+// written, or -1 when it ended by itself first.
+int run_and_kill(const std::vector<std::string>& args, const std::string& dir, int rows) {
+  std::vector<std::string> words = {GRAINS_BINARY};
+  words.insert(words.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  argv.push_back(nullptr);
   const pid_t pid = fork();
   if (pid == 0) {
     const int null = open("/dev/null", O_WRONLY);
     dup2(null, 1);
     dup2(null, 2);
-    execl("/bin/sh", "sh", "-c", (std::string(GRAINS_BINARY) + " " + args).c_str(), nullptr);
+    execv(argv[0], argv.data());
     _exit(127);
   }
   auto frames_written = [&] {
@@ -107,9 +113,9 @@ TEST_CASE("a killed run resumed from its checkpoint writes the frames of an unbr
 
   const std::string b = dir + "/b";
   // killed two frames past its second checkpoint (frame 8): frames 9 and 10 are made again
-  const int written =
-      run_and_kill("run " + graph + " --out " + b + " --quiet --threads 1 --frames 14 "
-                   "--checkpoint-every 4", b, 10);
+  const int written = run_and_kill({"run", graph, "--out", b, "--quiet", "--threads", "1",
+                                     "--frames", "14", "--checkpoint-every", "4"},
+                                    b, 10);
   REQUIRE(written >= 10);
   REQUIRE(written < 14);
   REQUIRE(run_grains("run --resume " + b + " --quiet --threads 1", log) == 0);

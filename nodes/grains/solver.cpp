@@ -853,75 +853,21 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     // until no grain moves more than kStabilizeTolerance of its radius, at most
     // constraint_iterations passes (and kStabilizeIterations): at rest one pass finds almost
     // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
-    // passes in most substeps, most of the substep's work.
+    // passes in most substeps, most of the substep's work, all of it without friction.
     const int stabilize_max = std::min(kStabilizeIterations, iterations);
-    // Friction in the passes. Their corrections are the bulk of a resting contact's load: a
-    // substep's gravity moves a grain g dt^2, while the overlap the iterations leave, removed by
-    // the next substep's passes, is several times that. Frictionless passes let a heap's grains
-    // slide past each other as they push apart (a settled heap compacted by 5% of its height in
-    // a quarter second from rest: docs/heap-angle.md). So each contact's corrections in the
-    // passes are summed, one friction pass bounds the passes' tangential shifts by them, and the
-    // grain pairs' sums join their Coulomb bound in the iterations. The friction pass moves a
-    // grain by a mean over its contacts, not tangential to each of them, so contact passes
-    // follow it: the substep must start without overlap, or the iterations turn what the
-    // friction made into velocity (sand_pile's pour blew apart in its first frame).
-    gr_normal_sums sums{nullptr, nullptr, nullptr, nullptr, nullptr};
-    if (pair_friction_pass) {
-      stable_pair_normal_.assign(neighbors_.indices.size(), 0u);
-      sums.pair = stable_pair_normal_.data();
-      sums.pair_iteration = pair_normal_it_.data();
-    }
-    if (collider_friction_pass) {
-      stable_collider_normal_.assign(plane_offsets_[n], 0.0f);
-      sums.collider = stable_collider_normal_.data();
-    }
-    // contact passes until no grain moves more than kStabilizeTolerance of its radius, adding
-    // each contact's corrections to `into` (when set)
-    auto contact_passes = [&](const gr_normal_sums& into) {
-      for (int k = 0; k < stabilize_max; ++k) {
-        const float* x = P_stable_.data();
-        float* next = p_stable_next_.data();
-        float moved = 0;
-#pragma omp parallel num_threads(threads) reduction(max : moved)
-        {
-          gr_normal_sums mine = into;  // this thread's row scratch
-          if (mine.pair_iteration)
-            mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
-#pragma omp for schedule(static)
-          for (long i = 0; i < ln; ++i) {
-            const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i), &mine);
-            const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
-            moved = std::max(moved, gr_length(d) / radius_[i]);
-            gr_store3(next, i, y);
-          }
-        }
-        P_stable_.swap(p_stable_next_);
-        if (!(moved > kStabilizeTolerance)) break;
-      }
-    };
-    contact_passes(sums);
-    if (pair_friction_pass || collider_friction_pass) {
-      gr_grains gf = gs;
-      gf.P = P0_;
-      gf.pair_slip = nullptr;  // the remembered slip is the iterations' to pull back
-      gf.plane_slip = nullptr;
-      gr_params pf = ps;
-      pf.dt = 0.0f;  // a collider's surface motion belongs to the substep, not to the passes
+    for (int k = 0; k < stabilize_max; ++k) {
       const float* x = P_stable_.data();
       float* next = p_stable_next_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-      for (long i = 0; i < ln; ++i)
-        gr_store3(next, i, gr_friction_pass(&gf, &pf, x, &sums, static_cast<int>(i)));
+      float moved = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved)
+      for (long i = 0; i < ln; ++i) {
+        const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i));
+        const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
+        moved = std::max(moved, gr_length(d) / radius_[i]);
+        gr_store3(next, i, y);
+      }
       P_stable_.swap(p_stable_next_);
-      contact_passes(gr_normal_sums{nullptr, nullptr, nullptr, nullptr, nullptr});
-    }
-    if (pair_friction_pass) {
-      uint32_t* bound = pair_normal_.data();
-      const uint32_t* passes = stable_pair_normal_.data();
-      const long entries = static_cast<long>(stable_pair_normal_.size());
-#pragma omp parallel for schedule(static) num_threads(threads)
-      for (long k = 0; k < entries; ++k)
-        bound[k] = gr_as_uint(gr_as_float(bound[k]) + gr_as_float(passes[k]));
+      if (!(moved > kStabilizeTolerance)) break;
     }
     float* p = p_.data();
     const float* x = P_stable_.data();

@@ -179,10 +179,6 @@ class GrainsSolver {
   static constexpr float kStabilizeTolerance = 0.002f;  // of a grain's radius
   static constexpr int kStabilizeIterations = 64;  // and at most constraint_iterations
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
-  // (neighbour entries, float bits; plane entries) m: each contact's corrections in the
-  // pre-stabilization passes, summed (the friction in the passes)
-  std::vector<uint32_t> stable_pair_normal_;
-  std::vector<float> stable_collider_normal_;
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   // the history saved at the end of the last substep, by grain in that substep's order: the id
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once

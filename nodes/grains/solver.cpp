@@ -1211,7 +1211,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
                                       gr_load3(pair_slip_.data(), static_cast<int>(k)));
           const gr_float3 xij = gr_sub(pi, pj);
           const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), ii, j);
-          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_pair_history_cap(&g, &prm, ii, j));
+          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_pair_history_cap(&g, &prm, ii, j, gr_as_float(pair_normal_[k])));
         }
         gr_store3(hist_slip_.data(), static_cast<int>(k), h);
       }
@@ -1225,7 +1225,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
       dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
       hist_plane_collider_[m] = plane_collider_[e];
       gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
-                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_plane_history_cap(&g, &prm, ii)));
+                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_plane_history_cap(&g, &prm, ii, collider_normal_[e])));
       ++m;
     }
   }

@@ -266,6 +266,8 @@ std::map<std::string, Special> specials() {
       {"solver.colliders", {json::object(), json::array()}},
       // the heap asks for more than a few substeps: a low cap binds
       {"solver.max_substeps", {json::object(), 2}},
+      // a tolerance far under the heap's overlaps keeps error control at max_substeps
+      {"solver.error_tolerance", {json::object(), 1e-6}},
       // grains
       {"grains.activation", {json::object(), 0}},
       {"grains.group", {json::object(), "nobody"}},

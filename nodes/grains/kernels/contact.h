@@ -260,15 +260,21 @@ GR_INLINE void gr_gather_pair_slip(const gr_grains* g, const gr_params* prm,
 
 /* Contact history (GrainsSolver::save_history): a stuck contact remembers at most this much slip,
  * as a DEM contact's tangential spring saturates at mu F_n / k_t (a fraction of its normal
- * overlap): contact_memory x the static coefficient x the summed radii. Slip beyond it is
- * sliding, forgotten. */
-GR_INLINE float gr_pair_history_cap(const gr_grains* g, const gr_params* prm, int i, int j) {
-  const float mu = prm->contact_memory * prm->friction_with_particles * prm->static_threshold;
-  return mu * gr_attr(g->friction, i) * (g->radius[i] + g->radius[j]);
+ * overlap): contact_memory x the static coefficient x the summed radii, and never more than one
+ * substep of its static friction can pull back, the static coefficient x a, the normal
+ * correction the contact applied in the substep (the bound gr_friction_pass used). A remembered
+ * slip beyond that bound fails the next substep's static test before anything moves, so the
+ * contact would stay kinetic in every later substep and a heap at rest would creep (the demo's
+ * heap sank 12 mm in 2 s from rest with the first cap alone, 5 mm with both:
+ * docs/heap-angle.md). Slip beyond the cap is sliding, forgotten. */
+GR_INLINE float gr_pair_history_cap(const gr_grains* g, const gr_params* prm, int i, int j,
+                                    float a) {
+  const float mu = prm->friction_with_particles * prm->static_threshold * gr_attr(g->friction, i);
+  return mu * gr_min(prm->contact_memory * (g->radius[i] + g->radius[j]), a);
 }
-GR_INLINE float gr_plane_history_cap(const gr_grains* g, const gr_params* prm, int i) {
-  const float mu = prm->contact_memory * prm->friction_with_colliders * prm->static_threshold;
-  return mu * gr_attr(g->friction, i) * 2 * g->radius[i];
+GR_INLINE float gr_plane_history_cap(const gr_grains* g, const gr_params* prm, int i, float a) {
+  const float mu = prm->friction_with_colliders * prm->static_threshold * gr_attr(g->friction, i);
+  return mu * gr_min(prm->contact_memory * 2 * g->radius[i], a);
 }
 
 #endif /* GRAINS_KERNELS_CONTACT_H */

@@ -42,7 +42,8 @@ GR_PARAM(FLOAT, scale_kinetic, 0.5, KERNEL, .at_least(0),
          "kinetic friction: beyond it, a substep removes at most this x friction x the normal correction")
 GR_PARAM(FLOAT, contact_memory, 0.01, KERNEL, .at_least(0).scaled_by("friction"),
          "slip a stuck contact remembers and pulls back in later substeps, at most this x the static "
-         "coefficient x the summed radii (a DEM contact's tangential spring); 0: none, a heap creeps (not in POP Grains)")
+         "coefficient x the summed radii (a DEM contact's tangential spring), and no more than one substep of its "
+         "static friction pulls back; 0: none, a heap creeps (not in POP Grains)")
 /* internal collisions (kernels/contact.h); weight 0 = off */
 GR_PARAM(FLOAT, internal_collisions_weight, 1, KERNEL, .range(0, 2).scaled_by("repulsionweight"),
          "weight of grain-grain collisions; 0 disables them")

@@ -42,6 +42,15 @@ std::string format(const char* fmt, auto... args) {
   return out;
 }
 
+// A CSV float as %.<digits>g, but always readable as a float: "0" and "2" become "0.0" and
+// "2.0", so a reader that infers column types (pandas) never takes an all-zero or whole-valued
+// column for integers. "1e-05", "0.5", "nan" and "inf" stay as they are.
+std::string csv_float(double v, int digits) {
+  std::string s = format("%.*g", digits, v);
+  if (s.find_first_of(".eEnN") == std::string::npos) s += ".0";
+  return s;
+}
+
 }  // namespace
 
 FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
@@ -119,17 +128,22 @@ void FrameWriter::write(const FrameOutput& out) {
       write_ply(dir_ + name, *out.points, attributes_);
   }
   append_text(dir_ + "/stats.csv",
-              format("%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
-                     s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
-                     s.max_strain, s.kinetic_energy, s.substeps, s.error),
+              format("%d,%s,%zu,%zu,%.3f,%s,%s,%s,%s,%d,%s\n", s.frame,
+                     csv_float(s.time, 6).c_str(), s.points, s.constraints, s.wall_ms,
+                     csv_float(s.max_penetration, 6).c_str(),
+                     csv_float(s.mean_penetration, 6).c_str(), csv_float(s.max_strain, 6).c_str(),
+                     csv_float(s.kinetic_energy, 9).c_str(), s.substeps,
+                     csv_float(s.error, 6).c_str()),
               false);
   if (s.colliders.empty()) return;
   const std::string path = dir_ + "/colliders.csv";
   const bool fresh = !std::filesystem::exists(path);
   std::string rows = fresh ? "frame,time,collider,fx,fy,fz,tx,ty,tz\n" : "";
   for (const auto& c : s.colliders)
-    rows += format("%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
-                   c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
+    rows += format("%d,%s,%s,%s,%s,%s,%s,%s,%s\n", s.frame, csv_float(s.time, 6).c_str(),
+                   c.name.c_str(), csv_float(c.force.x, 9).c_str(), csv_float(c.force.y, 9).c_str(),
+                   csv_float(c.force.z, 9).c_str(), csv_float(c.torque.x, 9).c_str(),
+                   csv_float(c.torque.y, 9).c_str(), csv_float(c.torque.z, 9).c_str());
   append_text(path, rows, fresh);
 }
 

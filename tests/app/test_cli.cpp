@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
+#include <vector>
 
 #include "engine/geometry_io.h"
 #include "tests/support/support.h"
@@ -44,6 +46,31 @@ TEST_CASE("run writes every frame and stats.csv", "[cli]") {
   std::string log = read_text(dir + "/log");
   CHECK_THAT(log, Catch::Contains("frame 1/3"));
   CHECK_THAT(log, Catch::Contains("frame 3/3"));
+}
+
+TEST_CASE("stats.csv writes every float column as a float, zeros and whole numbers too", "[cli]") {
+  // a reader that infers column types (pandas) must read the same type from every run: the drop
+  // has no constraints (max_strain all zero) and frame 24 ends at a whole second
+  std::string dir = temp_dir("cli_stats_floats");
+  std::string graph = write_file(dir, "drop.json", kGraph);
+  REQUIRE(run_grains("run " + graph + " --out " + dir + "/out --frames 24 --quiet", dir + "/log") == 0);
+  std::istringstream rows(read_text(dir + "/out/stats.csv"));
+  std::string line;
+  std::getline(rows, line);  // header
+  int count = 0;
+  for (; std::getline(rows, line); ++count) {
+    INFO(line);
+    std::vector<std::string> field;
+    std::istringstream cells(line);
+    for (std::string c; std::getline(cells, c, ',');) field.push_back(c);
+    REQUIRE(field.size() == 11);
+    // frame, points, constraints and substeps are counts; the rest are floats
+    for (size_t k : {1, 4, 5, 6, 7, 8, 10})
+      CHECK(field[k].find_first_of(".e") != std::string::npos);
+    for (size_t k : {0, 2, 3, 9}) CHECK(field[k].find_first_of(".e") == std::string::npos);
+  }
+  CHECK(count == 24);
+  CHECK_THAT(read_text(dir + "/out/stats.csv"), Catch::Contains("\n24,1.0,27,0,"));
 }
 
 TEST_CASE("quiet prints nothing and set overrides a parameter", "[cli]") {

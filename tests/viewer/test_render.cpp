@@ -471,6 +471,7 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
     std::string args = test::read_text(bin + "/args");
     CHECK(args.find("-pix_fmt rgb24 -s 32x24 -framerate 12") != std::string::npos);
     CHECK(args.find("-pix_fmt yuv420p") != std::string::npos);
+    CHECK(args.find("-movflags +faststart") != std::string::npos);  // the index first
     // a GIF: one palette for the clip (palettegen, paletteuse), half size above 640 pixels
     for (const std::string size : {"32x24", "642x24"}) {
       const bool wide = size == "642x24";
@@ -483,6 +484,7 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
       CHECK(args.find("-pix_fmt rgb24 -s " + size) != std::string::npos);
       CHECK(args.find("split[a][b];[a]palettegen[p];[b][p]paletteuse") != std::string::npos);
       CHECK((args.find("scale=iw/2:ih/2") != std::string::npos) == wide);
+      CHECK(args.find("faststart") == std::string::npos);  // an MP4 muxer's flag
       // the stand-in copies the raw frames: two at full size, ffmpeg scales
       CHECK(std::filesystem::file_size(dir + "/a.gif") == 2u * 3 * 24 * (wide ? 642 : 32));
     }

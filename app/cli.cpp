@@ -99,14 +99,15 @@ class RunProgress {
   double said_at_ = 0;  // elapsed s at the last line
 };
 
-// What a run writes in its folder: frames, stats.csv, collider_poses.csv, and the frames' .tmp
-// files while writing.
+// What a run writes in its folder: frames (.ply, .vtp), frames.pvd, stats.csv,
+// collider_poses.csv, colliders.csv, the checkpoint, and their .tmp files while writing.
 bool run_owns(const std::filesystem::path& p) {
   const std::string name = p.filename().string();
   const std::string stem =
       name.size() > 4 && name.ends_with(".tmp") ? name.substr(0, name.size() - 4) : name;
   return stem == "stats.csv" || stem == kColliderPosesFile || stem == kCheckpointFile ||
-         (stem.starts_with("frame_") && stem.ends_with(".ply"));
+         stem == "colliders.csv" || stem == kVtkCollectionFile ||
+         (stem.starts_with("frame_") && (stem.ends_with(".ply") || stem.ends_with(".vtp")));
 }
 
 LoadError used_folder(const std::string& dir, const std::string& what) {
@@ -240,7 +241,8 @@ int cmd_run(RunRequest req) {
     first = sim.frame() + 1;
     for (const std::string& dir : dirs)
       sinks.push_back(std::make_unique<FrameWriter>(
-          FrameWriter::continuing(dir, g.output.attributes, sim.frame())));
+          FrameWriter::continuing(dir, g.output.attributes, sim.frame(),
+                                  FrameFormats::from(g.output.formats))));
   } else {
     const std::string checkpoint = out + "/" + kCheckpointFile;
     // the solvers' folders inside `out` and its checkpoint are the run's own; anything else
@@ -262,7 +264,8 @@ int cmd_run(RunRequest req) {
       fs::remove(checkpoint + ".tmp", ec);
     }
     for (const std::string& dir : dirs)
-      sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+      sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes, false,
+                                                    FrameFormats::from(g.output.formats)));
   }
   RunRecord record;
   if (req.checkpoint_every > 0) {
@@ -430,8 +433,8 @@ int cli_main(int argc, char** argv) {
                   "the most points the run may hold (default 20000000, about 12 GB)")
       ->check(positive_number());
   run->add_flag("--overwrite", overwrite,
-                "replace the frames, stats.csv, collider_poses.csv and checkpoint an earlier "
-                "run left in the output folder");
+                "replace the frames (.ply, .vtp, frames.pvd), stats.csv, collider_poses.csv, "
+                "colliders.csv and checkpoint an earlier run left in the output folder");
   run->add_option("--checkpoint-every", req.checkpoint_every,
                   "write the run's state to OUT/checkpoint.grains every N frames and at the end")
       ->check(positive_number());

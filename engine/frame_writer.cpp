@@ -53,8 +53,19 @@ std::string csv_float(double v, int digits) {
 
 }  // namespace
 
-FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
-    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all) {
+FrameFormats FrameFormats::from(const std::vector<std::string>& names) {
+  FrameFormats f;
+  f.ply = f.vtp = false;
+  for (const std::string& name : names) {
+    f.ply = f.ply || name == "ply";
+    f.vtp = f.vtp || name == "vtp";
+  }
+  return f;
+}
+
+FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all,
+                         FrameFormats formats)
+    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all), formats_(formats) {
   // a folder the user named that cannot be made or written in is bad input, refused before any
   // frame runs; a write that fails later (disk full) is a failure of the run
   std::error_code ec;
@@ -69,6 +80,7 @@ FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, b
               true);
   append_text(dir_ + "/" + kColliderPosesFile, collider_poses_header(), true);
   std::filesystem::remove(dir_ + "/colliders.csv", ec);  // written from the first frame with feedback
+  if (formats_.vtp) write_pvd(dir_ + "/" + kVtkCollectionFile, collection_);
 }
 
 namespace {
@@ -90,11 +102,12 @@ void keep_rows_up_to(const std::string& path, int after) {
 }  // namespace
 
 FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> attributes,
-                                    int after) {
+                                    int after, FrameFormats formats) {
   namespace fs = std::filesystem;
   FrameWriter w;
   w.dir_ = std::move(dir);
   w.attributes_ = std::move(attributes);
+  w.formats_ = formats;
   std::error_code ec;
   if (!fs::is_regular_file(w.dir_ + "/stats.csv", ec))
     throw LoadError(w.dir_, "", "not the folder of a run (it has no stats.csv)");
@@ -105,10 +118,20 @@ FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> at
     if (fs::is_regular_file(w.dir_ + "/" + csv, ec)) keep_rows_up_to(w.dir_ + "/" + csv, after);
   for (const auto& e : fs::directory_iterator(w.dir_, ec)) {
     const std::string name = e.path().filename().string();
-    const bool tmp = name.ends_with(".ply.tmp");
-    if (name.starts_with("frame_") && (tmp || (name.ends_with(".ply") &&
-                                                std::atoi(name.c_str() + 6) > after)))
+    const bool tmp = name.ends_with(".ply.tmp") || name.ends_with(".vtp.tmp");
+    const bool frame = name.ends_with(".ply") || name.ends_with(".vtp");
+    if (name.starts_with("frame_") && (tmp || (frame && std::atoi(name.c_str() + 6) > after)))
       fs::remove(e.path(), ec);
+  }
+  // the collection keeps the frames it listed up to `after` (their files are kept above)
+  const std::string pvd = w.dir_ + "/" + kVtkCollectionFile;
+  fs::remove(pvd + ".tmp", ec);
+  if (w.formats_.vtp || fs::exists(pvd, ec)) {
+    for (const VtkDataSet& d : read_pvd(pvd))
+      if (d.file.starts_with("frame_") && std::atoi(d.file.c_str() + 6) <= after &&
+          fs::exists(w.dir_ + "/" + d.file, ec))
+        w.collection_.push_back(d);
+    write_pvd(pvd, w.collection_);
   }
   return w;
 }
@@ -119,13 +142,21 @@ void FrameWriter::write(const FrameOutput& out) {
   if (out.colliders && !out.colliders->empty())
     append_text(dir_ + "/" + kColliderPosesFile,
                 collider_poses_rows(out.frame, s.time, *out.colliders), false);
-  if (out.write_points) {
+  if (out.write_points && formats_.ply) {
     char name[64];
     std::snprintf(name, sizeof name, "/frame_%04d.ply", out.frame);
     if (all_)
       write_ply_all(dir_ + name, *out.points);
     else
       write_ply(dir_ + name, *out.points, attributes_);
+  }
+  // the .vtp, then the collection that lists it: a killed run's frames.pvd names whole files
+  if (out.write_points && formats_.vtp) {
+    char name[64];
+    std::snprintf(name, sizeof name, "frame_%04d.vtp", out.frame);
+    write_vtp(dir_ + "/" + name, *out.points, attributes_, all_, s.time);
+    collection_.push_back({s.time, name});
+    write_pvd(dir_ + "/" + kVtkCollectionFile, collection_);
   }
   append_text(dir_ + "/stats.csv",
               format("%d,%s,%zu,%zu,%.3f,%s,%s,%s,%s,%d,%s\n", s.frame,

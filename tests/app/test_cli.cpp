@@ -73,6 +73,41 @@ TEST_CASE("stats.csv writes every float column as a float, zeros and whole numbe
   CHECK_THAT(read_text(dir + "/out/stats.csv"), Catch::Contains("\n24,1.0,27,0,"));
 }
 
+TEST_CASE("output.formats writes VTK frames and their collection, which --overwrite replaces",
+          "[cli][vtk]") {
+  std::string dir = temp_dir("cli_formats");
+  std::string text = kGraph;
+  const std::string attrs = R"("attributes": ["mass", "age", "force"])";
+  text.replace(text.find(attrs), attrs.size(), attrs + R"(, "formats": ["vtp"])");
+  std::string graph = write_file(dir, "vtp.json", text);
+  std::string out = dir + "/out";
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --frames 3 --quiet", dir + "/log") == 0);
+  for (const char* f : {"frame_0001.vtp", "frame_0003.vtp", "frames.pvd", "stats.csv"}) {
+    INFO(f);
+    CHECK(fs::exists(out + "/" + f));
+  }
+  CHECK_FALSE(fs::exists(out + "/frame_0001.ply"));  // vtp alone
+  const std::string pvd = read_text(out + "/frames.pvd");
+  CHECK(std::count(pvd.begin(), pvd.end(), '\n') == 8);  // 5 lines of XML, 3 frames
+  CHECK_THAT(pvd, Catch::Contains("timestep=\"0.125\" group=\"\" part=\"0\" file=\"frame_0003.vtp\""));
+  // what the run wrote counts as its own: without --overwrite the folder is refused, with it
+  // the .vtp frames and frames.pvd go with the rest
+  CHECK(run_grains("run " + graph + " --out " + out + " --frames 1 --quiet", dir + "/log") == 2);
+  REQUIRE(run_grains("run " + write_file(dir, "ply.json", kGraph) + " --out " + out +
+                         " --frames 1 --quiet --overwrite",
+                     dir + "/log") == 0);
+  CHECK(fs::exists(out + "/frame_0001.ply"));
+  CHECK_FALSE(fs::exists(out + "/frame_0001.vtp"));
+  CHECK_FALSE(fs::exists(out + "/frames.pvd"));
+  // a graph asking for a format there is none of is refused at load
+  text.replace(text.find("[\"vtp\"]"), 7, "[\"vtk\"]");
+  CHECK(run_grains("run " + write_file(dir, "vtk.json", text) + " --out " + dir + "/o2 --quiet",
+                   dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("vtk.json: /output/formats/0: unknown frame format 'vtk'"));
+  CHECK_FALSE(fs::exists(dir + "/o2"));
+}
+
 TEST_CASE("quiet prints nothing and set overrides a parameter", "[cli]") {
   std::string dir = temp_dir("cli_set");
   std::string graph = write_file(dir, "drop.json", kGraph);

@@ -10,6 +10,8 @@ packages=(
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd
   # the graph schema's test checks the examples with an independent validator
   python3 python3-jsonschema
+  # the VTK frames' test reads them with VTK's own reader, as ParaView does
+  python3-vtk9 python3-numpy
   # the fuzz targets (make fuzz-short, part of make test): clang 14, its libFuzzer and sanitizer
   # runtimes, its OpenMP, and llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14

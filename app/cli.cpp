@@ -29,6 +29,7 @@
 #include "engine/simulation.h"
 #include "nodes/common.h"
 #include "nodes/register.h"
+#include "viewer-offline/plot.h"
 #include "viewer-offline/render.h"
 
 namespace grains {
@@ -478,10 +479,12 @@ int cli_main(int argc, char** argv) {
 
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
+  viewer::PlotOptions plot_opts;
+  auto* plot = viewer::add_plot_subcommand(app, plot_opts);
 
   if (const int rc = parse_command_line("grains", app, argc, argv); rc >= 0) return rc;
 
-  // run and cook share the flags; render has its own (it sets the level itself)
+  // run and cook share the flags; render and plot have their own (they set the level themselves)
   set_log_level(quiet, verbose);
   return report_errors("grains", [&]() -> int {
     if (run->parsed()) {
@@ -517,6 +520,7 @@ int cli_main(int argc, char** argv) {
     }
     if (heap->parsed()) return cmd_heap(heap_frame, heap_d, heap_cx, heap_cz);
     if (render->parsed()) return viewer::render_command(render_opts);
+    if (plot->parsed()) return viewer::plot_command(plot_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
                       threads, cook_out, overwrite);

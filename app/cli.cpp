@@ -50,21 +50,22 @@ std::string duration_text(double s) {
   return fmt::format("{} h {:02} min", whole / 3600, whole % 3600 / 60);
 }
 
-// A run's progress, told once a frame (frame), with the time it has taken and an estimate of the
-// time left (the mean time per frame so far, times the frames left):
+// A run's progress, told once a frame (frame): the frame, the simulated time it ends at, the
+// points, the time it has taken and an estimate of the time left (the mean time per frame so far,
+// times the frames left):
 // - on a terminal, at the default level: a bar redrawn in place. It is written to stderr
 //   directly, not logged: spdlog ends every message with a newline, and the bar must stay on
 //   one line to be redrawn with '\r'.
-// - otherwise an info line, "frame 10/96  points 1500  12.3 ms  max_penetration 0.0012
-//   elapsed 4.1 s  left 35.2 s", for the first frame, the last, and at most one every
+// - otherwise an info line, "frame 10/96  points 1500  t 0.417 s  12.3 ms  max_penetration
+//   0.0012  elapsed 4.1 s  left 35.2 s", for the first frame, the last, and at most one every
 //   kEvery seconds between them (a long run's log stays short); with --verbose, every frame.
 class RunProgress {
  public:
   static constexpr double kEvery = 5;  // s between two lines, at the default level
 
   // frames: the run's last frame; first: the frame it starts at (after a checkpoint when resumed)
-  RunProgress(int frames, bool tty, int first = 1)
-      : frames_(frames), first_(first), bar_(tty && !log_verbose()) {}
+  RunProgress(int frames, double fps, bool tty, int first = 1)
+      : frames_(frames), first_(first), fps_(fps), bar_(tty && !log_verbose()) {}
 
   void frame(int done, size_t points, double ms, float max_penetration) {
     const double elapsed =
@@ -77,9 +78,10 @@ class RunProgress {
     }
     if (!(done == first_ || done == frames_ || elapsed - said_at_ >= kEvery || log_verbose())) return;
     said_at_ = elapsed;
-    spdlog::info("frame {}/{}  points {}  {:.1f} ms  max_penetration {:.4f}  elapsed {}  left {}",
-                 done, frames_, points, ms, max_penetration, duration_text(elapsed),
-                 duration_text(left));
+    spdlog::info(
+        "frame {}/{}  points {}  t {:.4g} s  {:.1f} ms  max_penetration {:.4f}  elapsed {}  left {}",
+        done, frames_, points, done / fps_, ms, max_penetration, duration_text(elapsed),
+        duration_text(left));
   }
 
  private:
@@ -87,14 +89,17 @@ class RunProgress {
     const int width = 30;
     const int filled = frames_ > 0 ? done * width / frames_ : width;
     std::fprintf(stderr,
-                 "\r[%.*s%*s] %d/%d frames  %zu points  %.1f ms/frame  %s elapsed, %s left   ",
+                 "\r[%.*s%*s] %d/%d frames  t %.4g s  %zu points  %.1f ms/frame  %s elapsed, %s "
+                 "left   ",
                  filled, "##############################", width - filled, "", done, frames_,
-                 points, ms, duration_text(elapsed).c_str(), duration_text(left).c_str());
+                 done / fps_, points, ms, duration_text(elapsed).c_str(),
+                 duration_text(left).c_str());
     if (done == frames_) std::fputc('\n', stderr);
     std::fflush(stderr);
   }
 
   int frames_, first_;
+  double fps_;
   bool bar_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
   double said_at_ = 0;  // elapsed s at the last line
@@ -279,7 +284,7 @@ int cmd_run(RunRequest req) {
   }
   for (const std::string& dir : dirs) spdlog::debug("writing frames to {}", dir);
   bool tty = isatty(fileno(stderr)) && !quiet;
-  RunProgress progress(g.frames, tty, first);
+  RunProgress progress(g.frames, g.fps, tty, first);
   std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
   for (int f = first; f <= g.frames; ++f) {
     sim.step_frame();

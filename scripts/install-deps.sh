@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages Grains builds with, only those that are missing.
 # Idempotent: on a machine that has everything it does nothing and needs no network.
+# With --clients, also what make test-clients needs (Blender).
 set -euo pipefail
 
 packages=(
@@ -16,6 +17,11 @@ packages=(
   # runtimes, its OpenMP, and llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14
 )
+
+# make test-clients: Blender, which imports a run with the add-on in tools/blender
+if [ "${1:-}" = "--clients" ]; then
+  packages+=(blender)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

@@ -13,6 +13,8 @@ packages=(
   python3 python3-jsonschema
   # the VTK frames' test reads them with VTK's own reader, as ParaView does
   python3-vtk9 python3-numpy
+  # render --video: the MP4 test checks what the real ffmpeg writes
+  ffmpeg
   # the fuzz targets (make fuzz-short, part of make test): clang 14, its libFuzzer and sanitizer
   # runtimes, its OpenMP, and llvm-symbolizer for readable stacks
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14

@@ -5,7 +5,7 @@ GRAINS := $(BUILD)/grains
 GRAINS_LAB := $(BUILD)/grains-lab
 
 .PHONY: deps configure build demo test docs bench bench-features clean format \
-        fuzz-build fuzz-short fuzz test-sanitize
+        fuzz-build fuzz-short fuzz test-sanitize test-clients
 
 deps:
 	bash scripts/install-deps.sh
@@ -25,6 +25,16 @@ demo: build
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	$(MAKE) fuzz-short
+
+# The tools people open runs with, reading a real example run with their own code: VTK's reader
+# (the CTest vtk_client, also part of test) and Blender headless with the add-on in tools/blender
+# (installs Blender first: about 300 MB of Debian packages; the add-on's import checked against
+# the PLY frames, and a still rendered with Cycles that must not be blank).
+test-clients: build
+	bash scripts/install-deps.sh --clients
+	cd $(BUILD) && ctest --output-on-failure -R vtk_client
+	blender -b --factory-startup --python-exit-code 1 --python tests/clients/check_blender.py -- \
+	  $(abspath $(GRAINS)) $(CURDIR) $(abspath $(BUILD))/blender_client
 
 # The node reference and the graph schema, generated from the node types' parameter tables
 # (a test fails when the committed copies are stale).

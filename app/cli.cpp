@@ -29,6 +29,7 @@
 #include "engine/simulation.h"
 #include "nodes/common.h"
 #include "nodes/register.h"
+#include "viewer-offline/plot.h"
 #include "viewer-offline/render.h"
 
 namespace grains {
@@ -49,21 +50,22 @@ std::string duration_text(double s) {
   return fmt::format("{} h {:02} min", whole / 3600, whole % 3600 / 60);
 }
 
-// A run's progress, told once a frame (frame), with the time it has taken and an estimate of the
-// time left (the mean time per frame so far, times the frames left):
+// A run's progress, told once a frame (frame): the frame, the simulated time it ends at, the
+// points, the time it has taken and an estimate of the time left (the mean time per frame so far,
+// times the frames left):
 // - on a terminal, at the default level: a bar redrawn in place. It is written to stderr
 //   directly, not logged: spdlog ends every message with a newline, and the bar must stay on
 //   one line to be redrawn with '\r'.
-// - otherwise an info line, "frame 10/96  points 1500  12.3 ms  max_penetration 0.0012
-//   elapsed 4.1 s  left 35.2 s", for the first frame, the last, and at most one every
+// - otherwise an info line, "frame 10/96  points 1500  t 0.417 s  12.3 ms  max_penetration
+//   0.0012  elapsed 4.1 s  left 35.2 s", for the first frame, the last, and at most one every
 //   kEvery seconds between them (a long run's log stays short); with --verbose, every frame.
 class RunProgress {
  public:
   static constexpr double kEvery = 5;  // s between two lines, at the default level
 
   // frames: the run's last frame; first: the frame it starts at (after a checkpoint when resumed)
-  RunProgress(int frames, bool tty, int first = 1)
-      : frames_(frames), first_(first), bar_(tty && !log_verbose()) {}
+  RunProgress(int frames, double fps, bool tty, int first = 1)
+      : frames_(frames), first_(first), fps_(fps), bar_(tty && !log_verbose()) {}
 
   void frame(int done, size_t points, double ms, float max_penetration) {
     const double elapsed =
@@ -76,9 +78,10 @@ class RunProgress {
     }
     if (!(done == first_ || done == frames_ || elapsed - said_at_ >= kEvery || log_verbose())) return;
     said_at_ = elapsed;
-    spdlog::info("frame {}/{}  points {}  {:.1f} ms  max_penetration {:.4f}  elapsed {}  left {}",
-                 done, frames_, points, ms, max_penetration, duration_text(elapsed),
-                 duration_text(left));
+    spdlog::info(
+        "frame {}/{}  points {}  t {:.4g} s  {:.1f} ms  max_penetration {:.4f}  elapsed {}  left {}",
+        done, frames_, points, done / fps_, ms, max_penetration, duration_text(elapsed),
+        duration_text(left));
   }
 
  private:
@@ -86,27 +89,31 @@ class RunProgress {
     const int width = 30;
     const int filled = frames_ > 0 ? done * width / frames_ : width;
     std::fprintf(stderr,
-                 "\r[%.*s%*s] %d/%d frames  %zu points  %.1f ms/frame  %s elapsed, %s left   ",
+                 "\r[%.*s%*s] %d/%d frames  t %.4g s  %zu points  %.1f ms/frame  %s elapsed, %s "
+                 "left   ",
                  filled, "##############################", width - filled, "", done, frames_,
-                 points, ms, duration_text(elapsed).c_str(), duration_text(left).c_str());
+                 done / fps_, points, ms, duration_text(elapsed).c_str(),
+                 duration_text(left).c_str());
     if (done == frames_) std::fputc('\n', stderr);
     std::fflush(stderr);
   }
 
   int frames_, first_;
+  double fps_;
   bool bar_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
   double said_at_ = 0;  // elapsed s at the last line
 };
 
-// What a run writes in its folder: frames, stats.csv, collider_poses.csv, and the frames' .tmp
-// files while writing.
+// What a run writes in its folder: frames (.ply, .vtp), frames.pvd, stats.csv,
+// collider_poses.csv, colliders.csv, the checkpoint, and their .tmp files while writing.
 bool run_owns(const std::filesystem::path& p) {
   const std::string name = p.filename().string();
   const std::string stem =
       name.size() > 4 && name.ends_with(".tmp") ? name.substr(0, name.size() - 4) : name;
   return stem == "stats.csv" || stem == kColliderPosesFile || stem == kCheckpointFile ||
-         (stem.starts_with("frame_") && stem.ends_with(".ply"));
+         stem == "colliders.csv" || stem == kVtkCollectionFile ||
+         (stem.starts_with("frame_") && (stem.ends_with(".ply") || stem.ends_with(".vtp")));
 }
 
 LoadError used_folder(const std::string& dir, const std::string& what) {
@@ -240,7 +247,8 @@ int cmd_run(RunRequest req) {
     first = sim.frame() + 1;
     for (const std::string& dir : dirs)
       sinks.push_back(std::make_unique<FrameWriter>(
-          FrameWriter::continuing(dir, g.output.attributes, sim.frame())));
+          FrameWriter::continuing(dir, g.output.attributes, sim.frame(),
+                                  FrameFormats::from(g.output.formats))));
   } else {
     const std::string checkpoint = out + "/" + kCheckpointFile;
     // the solvers' folders inside `out` and its checkpoint are the run's own; anything else
@@ -262,7 +270,8 @@ int cmd_run(RunRequest req) {
       fs::remove(checkpoint + ".tmp", ec);
     }
     for (const std::string& dir : dirs)
-      sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes));
+      sinks.push_back(std::make_unique<FrameWriter>(dir, g.output.attributes, false,
+                                                    FrameFormats::from(g.output.formats)));
   }
   RunRecord record;
   if (req.checkpoint_every > 0) {
@@ -275,7 +284,7 @@ int cmd_run(RunRequest req) {
   }
   for (const std::string& dir : dirs) spdlog::debug("writing frames to {}", dir);
   bool tty = isatty(fileno(stderr)) && !quiet;
-  RunProgress progress(g.frames, tty, first);
+  RunProgress progress(g.frames, g.fps, tty, first);
   std::vector<int> precision_said(sim.object_count(), 0);  // 1: stated, 2: warned
   for (int f = first; f <= g.frames; ++f) {
     sim.step_frame();
@@ -430,8 +439,8 @@ int cli_main(int argc, char** argv) {
                   "the most points the run may hold (default 20000000, about 12 GB)")
       ->check(positive_number());
   run->add_flag("--overwrite", overwrite,
-                "replace the frames, stats.csv, collider_poses.csv and checkpoint an earlier "
-                "run left in the output folder");
+                "replace the frames (.ply, .vtp, frames.pvd), stats.csv, collider_poses.csv, "
+                "colliders.csv and checkpoint an earlier run left in the output folder");
   run->add_option("--checkpoint-every", req.checkpoint_every,
                   "write the run's state to OUT/checkpoint.grains every N frames and at the end")
       ->check(positive_number());
@@ -475,10 +484,12 @@ int cli_main(int argc, char** argv) {
 
   viewer::RenderOptions render_opts;
   auto* render = viewer::add_render_subcommand(app, render_opts);
+  viewer::PlotOptions plot_opts;
+  auto* plot = viewer::add_plot_subcommand(app, plot_opts);
 
   if (const int rc = parse_command_line("grains", app, argc, argv); rc >= 0) return rc;
 
-  // run and cook share the flags; render has its own (it sets the level itself)
+  // run and cook share the flags; render and plot have their own (they set the level themselves)
   set_log_level(quiet, verbose);
   return report_errors("grains", [&]() -> int {
     if (run->parsed()) {
@@ -514,6 +525,7 @@ int cli_main(int argc, char** argv) {
     }
     if (heap->parsed()) return cmd_heap(heap_frame, heap_d, heap_cx, heap_cz);
     if (render->parsed()) return viewer::render_command(render_opts);
+    if (plot->parsed()) return viewer::plot_command(plot_opts);
     if (cook->parsed())
       return cmd_cook(type, in, sets, substeps, cook_frames, ground_opt->count() > 0, ground,
                       threads, cook_out, overwrite);

@@ -42,10 +42,30 @@ std::string format(const char* fmt, auto... args) {
   return out;
 }
 
+// A CSV float as %.<digits>g, but always readable as a float: "0" and "2" become "0.0" and
+// "2.0", so a reader that infers column types (pandas) never takes an all-zero or whole-valued
+// column for integers. "1e-05", "0.5", "nan" and "inf" stay as they are.
+std::string csv_float(double v, int digits) {
+  std::string s = format("%.*g", digits, v);
+  if (s.find_first_of(".eEnN") == std::string::npos) s += ".0";
+  return s;
+}
+
 }  // namespace
 
-FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all)
-    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all) {
+FrameFormats FrameFormats::from(const std::vector<std::string>& names) {
+  FrameFormats f;
+  f.ply = f.vtp = false;
+  for (const std::string& name : names) {
+    f.ply = f.ply || name == "ply";
+    f.vtp = f.vtp || name == "vtp";
+  }
+  return f;
+}
+
+FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, bool all,
+                         FrameFormats formats)
+    : dir_(std::move(dir)), attributes_(std::move(attributes)), all_(all), formats_(formats) {
   // a folder the user named that cannot be made or written in is bad input, refused before any
   // frame runs; a write that fails later (disk full) is a failure of the run
   std::error_code ec;
@@ -60,6 +80,7 @@ FrameWriter::FrameWriter(std::string dir, std::vector<std::string> attributes, b
               true);
   append_text(dir_ + "/" + kColliderPosesFile, collider_poses_header(), true);
   std::filesystem::remove(dir_ + "/colliders.csv", ec);  // written from the first frame with feedback
+  if (formats_.vtp) write_pvd(dir_ + "/" + kVtkCollectionFile, collection_);
 }
 
 namespace {
@@ -81,11 +102,12 @@ void keep_rows_up_to(const std::string& path, int after) {
 }  // namespace
 
 FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> attributes,
-                                    int after) {
+                                    int after, FrameFormats formats) {
   namespace fs = std::filesystem;
   FrameWriter w;
   w.dir_ = std::move(dir);
   w.attributes_ = std::move(attributes);
+  w.formats_ = formats;
   std::error_code ec;
   if (!fs::is_regular_file(w.dir_ + "/stats.csv", ec))
     throw LoadError(w.dir_, "", "not the folder of a run (it has no stats.csv)");
@@ -96,10 +118,20 @@ FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> at
     if (fs::is_regular_file(w.dir_ + "/" + csv, ec)) keep_rows_up_to(w.dir_ + "/" + csv, after);
   for (const auto& e : fs::directory_iterator(w.dir_, ec)) {
     const std::string name = e.path().filename().string();
-    const bool tmp = name.ends_with(".ply.tmp");
-    if (name.starts_with("frame_") && (tmp || (name.ends_with(".ply") &&
-                                                std::atoi(name.c_str() + 6) > after)))
+    const bool tmp = name.ends_with(".ply.tmp") || name.ends_with(".vtp.tmp");
+    const bool frame = name.ends_with(".ply") || name.ends_with(".vtp");
+    if (name.starts_with("frame_") && (tmp || (frame && std::atoi(name.c_str() + 6) > after)))
       fs::remove(e.path(), ec);
+  }
+  // the collection keeps the frames it listed up to `after` (their files are kept above)
+  const std::string pvd = w.dir_ + "/" + kVtkCollectionFile;
+  fs::remove(pvd + ".tmp", ec);
+  if (w.formats_.vtp || fs::exists(pvd, ec)) {
+    for (const VtkDataSet& d : read_pvd(pvd))
+      if (d.file.starts_with("frame_") && std::atoi(d.file.c_str() + 6) <= after &&
+          fs::exists(w.dir_ + "/" + d.file, ec))
+        w.collection_.push_back(d);
+    write_pvd(pvd, w.collection_);
   }
   return w;
 }
@@ -110,7 +142,7 @@ void FrameWriter::write(const FrameOutput& out) {
   if (out.colliders && !out.colliders->empty())
     append_text(dir_ + "/" + kColliderPosesFile,
                 collider_poses_rows(out.frame, s.time, *out.colliders), false);
-  if (out.write_points) {
+  if (out.write_points && formats_.ply) {
     char name[64];
     std::snprintf(name, sizeof name, "/frame_%04d.ply", out.frame);
     if (all_)
@@ -118,18 +150,31 @@ void FrameWriter::write(const FrameOutput& out) {
     else
       write_ply(dir_ + name, *out.points, attributes_);
   }
+  // the .vtp, then the collection that lists it: a killed run's frames.pvd names whole files
+  if (out.write_points && formats_.vtp) {
+    char name[64];
+    std::snprintf(name, sizeof name, "frame_%04d.vtp", out.frame);
+    write_vtp(dir_ + "/" + name, *out.points, attributes_, all_, s.time);
+    collection_.push_back({s.time, name});
+    write_pvd(dir_ + "/" + kVtkCollectionFile, collection_);
+  }
   append_text(dir_ + "/stats.csv",
-              format("%d,%.6g,%zu,%zu,%.3f,%.6g,%.6g,%.6g,%.9g,%d,%.6g\n", s.frame, s.time,
-                     s.points, s.constraints, s.wall_ms, s.max_penetration, s.mean_penetration,
-                     s.max_strain, s.kinetic_energy, s.substeps, s.error),
+              format("%d,%s,%zu,%zu,%.3f,%s,%s,%s,%s,%d,%s\n", s.frame,
+                     csv_float(s.time, 6).c_str(), s.points, s.constraints, s.wall_ms,
+                     csv_float(s.max_penetration, 6).c_str(),
+                     csv_float(s.mean_penetration, 6).c_str(), csv_float(s.max_strain, 6).c_str(),
+                     csv_float(s.kinetic_energy, 9).c_str(), s.substeps,
+                     csv_float(s.error, 6).c_str()),
               false);
   if (s.colliders.empty()) return;
   const std::string path = dir_ + "/colliders.csv";
   const bool fresh = !std::filesystem::exists(path);
   std::string rows = fresh ? "frame,time,collider,fx,fy,fz,tx,ty,tz\n" : "";
   for (const auto& c : s.colliders)
-    rows += format("%d,%.6g,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.frame, s.time, c.name.c_str(),
-                   c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z);
+    rows += format("%d,%s,%s,%s,%s,%s,%s,%s,%s\n", s.frame, csv_float(s.time, 6).c_str(),
+                   c.name.c_str(), csv_float(c.force.x, 9).c_str(), csv_float(c.force.y, 9).c_str(),
+                   csv_float(c.force.z, 9).c_str(), csv_float(c.torque.x, 9).c_str(),
+                   csv_float(c.torque.y, 9).c_str(), csv_float(c.torque.z, 9).c_str());
   append_text(path, rows, fresh);
 }
 

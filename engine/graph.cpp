@@ -1,5 +1,6 @@
 #include "engine/graph.h"
 
+#include <algorithm>
 #include <cctype>
 #include <filesystem>
 #include <fstream>
@@ -405,7 +406,7 @@ struct Loader {
     if (root.contains("output")) {
       const json& o = root["output"];
       if (!o.is_object()) fail("/output", "output is an object");
-      allow_keys(*this, o, "/output", {"dir", "every", "attributes"});
+      allow_keys(*this, o, "/output", {"dir", "every", "attributes", "formats"});
       if (o.contains("dir")) {
         if (!o["dir"].is_string() || o["dir"].get<std::string>().empty())
           fail("/output/dir", "dir is a non-empty string");
@@ -429,6 +430,27 @@ struct Loader {
           g.output.attributes.push_back(a.get<std::string>());
           if (std::string why = unknown_output_attribute(g, g.output.attributes.back()); !why.empty())
             fail("/output/attributes/" + std::to_string(k), why);
+        }
+      }
+      if (o.contains("formats")) {
+        const json& f = o["formats"];
+        const std::vector<std::string>& known = output_format_names();
+        std::string list;
+        for (const std::string& k : known) list += (list.empty() ? "\"" : ", \"") + k + "\"";
+        if (!f.is_array() || f.empty())
+          fail("/output/formats",
+               "formats is an array of frame formats, at least one, each one of " + list);
+        g.output.formats.clear();
+        for (size_t k = 0; k < f.size(); ++k) {
+          const std::string at = "/output/formats/" + std::to_string(k);
+          if (!f[k].is_string()) fail(at, "a format is a string, one of " + list);
+          const std::string name = f[k].get<std::string>();
+          if (std::find(known.begin(), known.end(), name) == known.end())
+            fail(at, "unknown frame format '" + name + "': one of " + list);
+          if (std::find(g.output.formats.begin(), g.output.formats.end(), name) !=
+              g.output.formats.end())
+            fail(at, "format '" + name + "' is named twice");
+          g.output.formats.push_back(name);
         }
       }
     } else {

@@ -27,10 +27,18 @@ struct NodeDesc {
   std::string pointer;  // JSON pointer of the node, e.g. /nodes/3
 };
 
+// The file formats a frame may be written as (output.formats): "ply" (DESIGN §6) and "vtp" (VTK
+// XML PolyData with a .pvd collection, engine/vtk_io.h).
+inline const std::vector<std::string>& output_format_names() {
+  static const std::vector<std::string> names = {"ply", "vtp"};
+  return names;
+}
+
 struct OutputDesc {
   std::string dir = "out";
   int every = 1;
   std::vector<std::string> attributes;
+  std::vector<std::string> formats = {"ply"};  // each once, from output_format_names()
 };
 
 // Frames per second a graph may ask for: a frame of 1000 s to one of 1 us.

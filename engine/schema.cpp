@@ -143,7 +143,15 @@ std::string graph_schema_text() {
         {"attributes",
          {{"type", "array"},
           {"items", {{"type", "string"}, {"minLength", 1}}},
-          {"description", "point attributes written besides P"}}}}},
+          {"description", "point attributes written besides P"}}},
+        {"formats",
+         {{"type", "array"},
+          {"items", {{"enum", output_format_names()}}},
+          {"minItems", 1},
+          {"uniqueItems", true},
+          {"default", json::array({"ply"})},
+          {"description", "files each written frame is made as: ply (frame_NNNN.ply), vtp (VTK XML "
+                          "PolyData frame_NNNN.vtp, listed with its time in frames.pvd)"}}}}},
       {"additionalProperties", false}};
   json definitions = json::object();
   definitions["keyframes"] = keyframes();

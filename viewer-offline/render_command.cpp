@@ -348,11 +348,14 @@ class VideoSink {
     char num[64];
     std::snprintf(num, sizeof num, "%dx%d -framerate %g", width, height, fps);
     std::string output;  // the filter and the output's options
-    if (lower(fs::path(path).extension().string()) == ".gif")
+    const std::string ext = lower(fs::path(path).extension().string());
+    if (ext == ".gif")
       output = "-vf " + shell_quote(std::string(width > 640 ? "scale=iw/2:ih/2:flags=area," : "") +
                                     "split[a][b];[a]palettegen[p];[b][p]paletteuse");
     else  // yuv420p (what players expect) needs even sizes: pad by a pixel when odd
       output = "-vf " + shell_quote("pad=ceil(iw/2)*2:ceil(ih/2)*2") + " -pix_fmt yuv420p";
+    // an MP4 (QuickTime) file with its index first plays in a browser before it has all arrived
+    if (ext == ".mp4" || ext == ".m4v" || ext == ".mov") output += " -movflags +faststart";
     const std::string cmd = shell_quote(ffmpeg) +
                             " -y -loglevel error -f rawvideo -pix_fmt rgb24 -s " + num + " -i - " +
                             output + " " + shell_quote(path);
@@ -566,7 +569,8 @@ CLI::App* add_render_subcommand(CLI::App& app, RenderOptions& o) {
                 "attribute to colour by: v (speed), id, pscale, strain (edges), any float or int "
                 "attribute, a vector (its magnitude) or NAME.x/.y/.z; the range spans all frames");
   r->add_option("--video", o.video,
-                "also write a video through ffmpeg: FILE.mp4, FILE.gif (one palette for the clip), "
+                "also write a video through ffmpeg: FILE.mp4 (its index first, to play while it "
+                "downloads), FILE.gif (one palette for the clip), "
                 "or anything ffmpeg writes");
   r->add_option("--camera", o.camera,
                 "ex,ey,ez,tx,ty,tz,fov: eye, target, vertical fov in degrees "

@@ -39,7 +39,8 @@ const char* kScene = R"JSON({"grains_graph": 1, "name": "resume", "fps": 24, "fr
   {"name": "paddle", "type": "collider", "params": {"shape": "box", "size": [0.3, 0.05, 0.05],
     "translate": ["-0.1 + 0.2 * $T", "0.04", "0"]}},
   {"name": "s", "type": "solver", "inputs": ["g"], "params": {"max_substeps": 16, "colliders": ["ground", "paddle"]}}],
-  "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"]}})JSON";
+  "output": {"dir": "unused", "attributes": ["targetP", "impact", "impactimpulse"],
+             "formats": ["ply", "vtp"]}})JSON";
 
 // The child `grains ARGS` (the program itself, no shell between: the kill must reach it),
 // killed (SIGKILL) as soon as `dir`'s stats.csv holds `rows` frames; returns the frames it had
@@ -93,7 +94,14 @@ void require_same_run(const std::string& a, const std::string& b, int frames) {
     INFO("frame " << f);
     REQUIRE(fs::exists(b + name));
     REQUIRE(read_text(a + name) == read_text(b + name));
+    std::snprintf(name, sizeof name, "/frame_%04d.vtp", f);
+    REQUIRE(read_text(a + name) == read_text(b + name));
   }
+  // the collection lists every frame once, as the unbroken run's does
+  CHECK(read_text(a + "/frames.pvd") == read_text(b + "/frames.pvd"));
+  char last[32];
+  std::snprintf(last, sizeof last, "\"frame_%04d.vtp\"", frames);
+  CHECK(read_text(b + "/frames.pvd").find(last) != std::string::npos);
   CHECK_FALSE(fs::exists(b + "/frame_" + std::to_string(frames + 1) + ".ply"));
   CHECK(stats_without_time(a) == stats_without_time(b));
   CHECK(read_text(a + "/collider_poses.csv") == read_text(b + "/collider_poses.csv"));

@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
+#include <vector>
 
 #include "engine/geometry_io.h"
 #include "tests/support/support.h"
@@ -44,6 +46,66 @@ TEST_CASE("run writes every frame and stats.csv", "[cli]") {
   std::string log = read_text(dir + "/log");
   CHECK_THAT(log, Catch::Contains("frame 1/3"));
   CHECK_THAT(log, Catch::Contains("frame 3/3"));
+}
+
+TEST_CASE("stats.csv writes every float column as a float, zeros and whole numbers too", "[cli]") {
+  // a reader that infers column types (pandas) must read the same type from every run: the drop
+  // has no constraints (max_strain all zero) and frame 24 ends at a whole second
+  std::string dir = temp_dir("cli_stats_floats");
+  std::string graph = write_file(dir, "drop.json", kGraph);
+  REQUIRE(run_grains("run " + graph + " --out " + dir + "/out --frames 24 --quiet", dir + "/log") == 0);
+  std::istringstream rows(read_text(dir + "/out/stats.csv"));
+  std::string line;
+  std::getline(rows, line);  // header
+  int count = 0;
+  for (; std::getline(rows, line); ++count) {
+    INFO(line);
+    std::vector<std::string> field;
+    std::istringstream cells(line);
+    for (std::string c; std::getline(cells, c, ',');) field.push_back(c);
+    REQUIRE(field.size() == 11);
+    // frame, points, constraints and substeps are counts; the rest are floats
+    for (size_t k : {1, 4, 5, 6, 7, 8, 10})
+      CHECK(field[k].find_first_of(".e") != std::string::npos);
+    for (size_t k : {0, 2, 3, 9}) CHECK(field[k].find_first_of(".e") == std::string::npos);
+  }
+  CHECK(count == 24);
+  CHECK_THAT(read_text(dir + "/out/stats.csv"), Catch::Contains("\n24,1.0,27,0,"));
+}
+
+TEST_CASE("output.formats writes VTK frames and their collection, which --overwrite replaces",
+          "[cli][vtk]") {
+  std::string dir = temp_dir("cli_formats");
+  std::string text = kGraph;
+  const std::string attrs = R"("attributes": ["mass", "age", "force"])";
+  text.replace(text.find(attrs), attrs.size(), attrs + R"(, "formats": ["vtp"])");
+  std::string graph = write_file(dir, "vtp.json", text);
+  std::string out = dir + "/out";
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --frames 3 --quiet", dir + "/log") == 0);
+  for (const char* f : {"frame_0001.vtp", "frame_0003.vtp", "frames.pvd", "stats.csv"}) {
+    INFO(f);
+    CHECK(fs::exists(out + "/" + f));
+  }
+  CHECK_FALSE(fs::exists(out + "/frame_0001.ply"));  // vtp alone
+  const std::string pvd = read_text(out + "/frames.pvd");
+  CHECK(std::count(pvd.begin(), pvd.end(), '\n') == 8);  // 5 lines of XML, 3 frames
+  CHECK_THAT(pvd, Catch::Contains("timestep=\"0.125\" group=\"\" part=\"0\" file=\"frame_0003.vtp\""));
+  // what the run wrote counts as its own: without --overwrite the folder is refused, with it
+  // the .vtp frames and frames.pvd go with the rest
+  CHECK(run_grains("run " + graph + " --out " + out + " --frames 1 --quiet", dir + "/log") == 2);
+  REQUIRE(run_grains("run " + write_file(dir, "ply.json", kGraph) + " --out " + out +
+                         " --frames 1 --quiet --overwrite",
+                     dir + "/log") == 0);
+  CHECK(fs::exists(out + "/frame_0001.ply"));
+  CHECK_FALSE(fs::exists(out + "/frame_0001.vtp"));
+  CHECK_FALSE(fs::exists(out + "/frames.pvd"));
+  // a graph asking for a format there is none of is refused at load
+  text.replace(text.find("[\"vtp\"]"), 7, "[\"vtk\"]");
+  CHECK(run_grains("run " + write_file(dir, "vtk.json", text) + " --out " + dir + "/o2 --quiet",
+                   dir + "/log") == 2);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("vtk.json: /output/formats/0: unknown frame format 'vtk'"));
+  CHECK_FALSE(fs::exists(dir + "/o2"));
 }
 
 TEST_CASE("quiet prints nothing and set overrides a parameter", "[cli]") {

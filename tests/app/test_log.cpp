@@ -37,7 +37,7 @@ TEST_CASE("run: --quiet prints nothing, the default progress, --verbose each fra
   const std::string normal = read_text(dir + "/default.log");
   INFO(normal);
   CHECK(has(normal, "frame 1/8  points 27  "));
-  CHECK(has(normal, "frame 8/8  points 27  "));
+  CHECK(has(normal, "frame 8/8  points 27  t 0.3333 s  "));  // the simulated time, 8 / 24 fps
   CHECK(has(normal, "  elapsed "));
   CHECK(has(normal, "  left 0.0 s\n"));  // the last frame
   CHECK_FALSE(has(normal, "frame 4/8"));

@@ -32,6 +32,7 @@ STRUCTURAL = [
     "missing", "must lie between", "keyframes need", "a key is", "interp is",
     "name is letters", "a collider takes no inputs", "the graph must be a JSON object",
     "expected a string", "an input is a node name", "seed is an integer",
+    "unknown frame format", "is named twice",
 ] + [
     # a literal out of range (the same words for a value an expression gives: see literal)
     "must be at least", "must be at most", "must be greater than", "within the float range",

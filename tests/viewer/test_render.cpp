@@ -471,6 +471,7 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
     std::string args = test::read_text(bin + "/args");
     CHECK(args.find("-pix_fmt rgb24 -s 32x24 -framerate 12") != std::string::npos);
     CHECK(args.find("-pix_fmt yuv420p") != std::string::npos);
+    CHECK(args.find("-movflags +faststart") != std::string::npos);  // the index first
     // a GIF: one palette for the clip (palettegen, paletteuse), half size above 640 pixels
     for (const std::string size : {"32x24", "642x24"}) {
       const bool wide = size == "642x24";
@@ -483,9 +484,37 @@ TEST_CASE("render command: colliders from the run, the grains binary, exit codes
       CHECK(args.find("-pix_fmt rgb24 -s " + size) != std::string::npos);
       CHECK(args.find("split[a][b];[a]palettegen[p];[b][p]paletteuse") != std::string::npos);
       CHECK((args.find("scale=iw/2:ih/2") != std::string::npos) == wide);
+      CHECK(args.find("faststart") == std::string::npos);  // an MP4 muxer's flag
       // the stand-in copies the raw frames: two at full size, ffmpeg scales
       CHECK(std::filesystem::file_size(dir + "/a.gif") == 2u * 3 * 24 * (wide ? 642 : 32));
     }
+  }
+  SECTION("the real ffmpeg writes an MP4 that streams: its index (moov) before its frames") {
+    // ffmpeg is one of the packages scripts/install-deps.sh installs (make test runs it)
+    REQUIRE(std::system("command -v ffmpeg > /dev/null") == 0);
+    REQUIRE(test::run_grains("render " + sim + " --out " + out + " --size 64x48 --video " + dir +
+                                 "/real.mp4 --quiet",
+                             log) == 0);
+    // the top-level boxes in order: (size, type) each, a size of 1 giving a 64-bit size after
+    const std::string mp4 = test::read_text(dir + "/real.mp4");
+    std::vector<std::string> boxes;
+    for (size_t at = 0; at + 8 <= mp4.size();) {
+      auto byte = [&](size_t k) { return uint64_t(static_cast<unsigned char>(mp4[at + k])); };
+      uint64_t size = byte(0) << 24 | byte(1) << 16 | byte(2) << 8 | byte(3);
+      boxes.push_back(mp4.substr(at + 4, 4));
+      if (size == 1 && at + 16 <= mp4.size()) {
+        size = 0;
+        for (size_t k = 8; k < 16; ++k) size = size << 8 | byte(k);
+      }
+      if (size < 8) break;
+      at += size;
+    }
+    INFO(boxes.size() << " boxes");
+    const auto moov = std::find(boxes.begin(), boxes.end(), "moov");
+    const auto mdat = std::find(boxes.begin(), boxes.end(), "mdat");
+    REQUIRE(moov != boxes.end());
+    REQUIRE(mdat != boxes.end());
+    CHECK(moov < mdat);
   }
 }
 

@@ -247,30 +247,16 @@ void write_elements(const std::string& path, const std::vector<ElementOut>& elem
   }
   header += "end_header\n";
 
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) write_fail(path, "cannot write", errno);
-  bool ok = std::fwrite(header.data(), 1, header.size(), f) == header.size();
-  for (const ElementOut& el : elements) {
-    if (!ok) break;
-    size_t bytes = 0;
-    std::unique_ptr<unsigned char[]> buf = el.encode(bytes);
-    ok = std::fwrite(buf.get(), 1, bytes, f) == bytes;
-  }
-  int err = ok ? 0 : errno;
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (!ok) {
-    std::remove(tmp.c_str());
-    write_fail(path, "cannot write", err);
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    err = errno;
-    std::remove(tmp.c_str());
-    write_fail(path, "cannot rename " + tmp, err);
-  }
+  write_file_atomically(path, [&](std::FILE* f) {
+    bool ok = std::fwrite(header.data(), 1, header.size(), f) == header.size();
+    for (const ElementOut& el : elements) {
+      if (!ok) break;
+      size_t bytes = 0;
+      std::unique_ptr<unsigned char[]> buf = el.encode(bytes);
+      ok = std::fwrite(buf.get(), 1, bytes, f) == bytes;
+    }
+    return ok;
+  });
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -776,6 +762,27 @@ Mesh read_ply_mesh(const std::string& path) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
+
+void write_file_atomically(const std::string& path, const std::function<bool(std::FILE*)>& write) {
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) write_fail(path, "cannot write", errno);
+  bool ok = write(f);
+  int err = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) {
+    ok = false;
+    err = errno;
+  }
+  if (!ok) {
+    std::remove(tmp.c_str());
+    write_fail(path, "cannot write", err);
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    err = errno;
+    std::remove(tmp.c_str());
+    write_fail(path, "cannot rename " + tmp, err);
+  }
+}
 
 void write_ply(const std::string& path, const ParticleStore& pts,
                const std::vector<std::string>& attributes) {

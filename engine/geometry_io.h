@@ -1,6 +1,8 @@
 // Geometry files: PLY frames (DESIGN §6) and PLY/OBJ inputs for sources, targets and colliders.
 #pragma once
 #include <array>
+#include <cstdio>
+#include <functional>
 #include <stdexcept>
 #include <cstdint>
 #include <string>
@@ -20,6 +22,12 @@ struct GeometryError : std::runtime_error {
 struct WriteError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
+
+// Writes a file to PATH.tmp with `write` (which returns false when an fwrite falls short), then
+// renames it to PATH, so a killed run never leaves a half-written file under PATH. On failure
+// removes PATH.tmp and throws WriteError: "PATH: cannot write (reason)" or "PATH: cannot rename
+// PATH.tmp (reason)". Shared by the PLY and VTK frame writers.
+void write_file_atomically(const std::string& path, const std::function<bool(std::FILE*)>& write);
 
 // Writes one frame as binary little-endian PLY, DESIGN §6:
 //   element vertex: float x y z, float vx vy vz, float pscale, int id, then each requested attribute

@@ -8,7 +8,6 @@
 #include "engine/vtk_io.h"
 
 #include <bit>
-#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -23,10 +22,6 @@
 namespace grains {
 
 namespace {
-
-[[noreturn]] void write_fail(const std::string& path, const std::string& what, int err) {
-  throw WriteError(path + ": " + what + " (" + std::strerror(err) + ")");
-}
 
 // Text for an XML attribute value.
 std::string xml_escape(const std::string& s) {
@@ -141,35 +136,20 @@ Block cell_array(const std::string& name, size_t verts, const ParticleStore& pts
   return made(name, "Float32", 1, v);
 }
 
-// Writes `text` then the blocks (each a 64-bit byte count and its bytes) then `tail` to PATH.tmp,
-// then renames it to PATH.
-void write_atomically(const std::string& path, const std::string& text,
-                      const std::vector<const Block*>& blocks, const std::string& tail) {
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) write_fail(path, "cannot write", errno);
-  bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-  for (const Block* b : blocks) {
-    if (!ok) break;
-    const uint64_t bytes = b->bytes;
-    ok = std::fwrite(&bytes, sizeof bytes, 1, f) == 1 &&
-         (bytes == 0 || std::fwrite(b->data, 1, bytes, f) == bytes);
-  }
-  ok = ok && std::fwrite(tail.data(), 1, tail.size(), f) == tail.size();
-  int err = ok ? 0 : errno;
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (!ok) {
-    std::remove(tmp.c_str());
-    write_fail(path, "cannot write", err);
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    err = errno;
-    std::remove(tmp.c_str());
-    write_fail(path, "cannot rename " + tmp, err);
-  }
+// Writes `text` then the blocks (each a 64-bit byte count and its bytes) then `tail` to PATH,
+// through PATH.tmp (write_file_atomically).
+void write_with_blocks(const std::string& path, const std::string& text,
+                       const std::vector<const Block*>& blocks, const std::string& tail) {
+  write_file_atomically(path, [&](std::FILE* f) {
+    bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    for (const Block* b : blocks) {
+      if (!ok) break;
+      const uint64_t bytes = b->bytes;
+      ok = std::fwrite(&bytes, sizeof bytes, 1, f) == 1 &&
+           (bytes == 0 || std::fwrite(b->data, 1, bytes, f) == bytes);
+    }
+    return ok && std::fwrite(tail.data(), 1, tail.size(), f) == tail.size();
+  });
 }
 
 }  // namespace
@@ -246,7 +226,7 @@ void write_vtp(const std::string& path, const ParticleStore& pts,
   x += "      <Lines>\n" + describe(line_conn, "        ");
   x += describe(line_ends, "        ") + "      </Lines>\n";
   x += "    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _";
-  write_atomically(path, x, order, "\n  </AppendedData>\n</VTKFile>\n");
+  write_with_blocks(path, x, order, "\n  </AppendedData>\n</VTKFile>\n");
 }
 
 void write_pvd(const std::string& path, const std::vector<VtkDataSet>& frames) {
@@ -257,7 +237,7 @@ void write_pvd(const std::string& path, const std::vector<VtkDataSet>& frames) {
     x += "    <DataSet timestep=\"" + number(d.time) + "\" group=\"\" part=\"0\" file=\"" +
          xml_escape(d.file) + "\"/>\n";
   x += "  </Collection>\n</VTKFile>\n";
-  write_atomically(path, x, {}, "");
+  write_with_blocks(path, x, {}, "");
 }
 
 std::vector<VtkDataSet> read_pvd(const std::string& path) {

@@ -9,34 +9,23 @@ positions turned Z-up, edges (the constraints); every PLY column as an attribute
 kind (v, velocity and requested vectors Z-up; restlength and strain on the edges); the spheres'
 modifier. Then renders a still with Cycles and checks that it is not blank.
 """
-import json
 import os
-import subprocess
 import sys
 
 import bpy
 import numpy as np
 
+# Blender adds no script's folder to sys.path; rope_run.py lies beside this file
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import rope_run  # noqa: E402
+
 FRAMES = 6
 
 
 def main():
-    grains, src, work = sys.argv[sys.argv.index("--") + 1:][:3]
-    os.makedirs(work, exist_ok=True)
-    example = os.path.abspath(os.path.join(src, "graphs", "rope.json"))
-    with open(example, encoding="utf-8") as f:
-        graph = json.load(f)
-    for node in graph["nodes"]:
-        if "file" in node.get("params", {}):
-            node["params"]["file"] = os.path.join(os.path.dirname(example), node["params"]["file"])
-    graph.pop("$schema", None)
-    out = os.path.join(work, "out")
-    graph["output"] = {"dir": out, "attributes": ["mass", "force", "ispbd"]}
-    path = os.path.join(work, "rope.json")
-    with open(path, "w", encoding="utf-8") as f:
-        json.dump(graph, f)
-    subprocess.run([grains, "run", path, "--frames", str(FRAMES), "--quiet", "--overwrite"],
-                   check=True)
+    grains, src, work = rope_run.arguments()
+    graph, out = rope_run.run_rope(grains, src, work, FRAMES,
+                                   {"attributes": ["mass", "force", "ispbd"]}, ["--overwrite"])
 
     sys.path.insert(0, os.path.join(src, "tools", "blender"))
     import grains_import

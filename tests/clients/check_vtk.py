@@ -14,12 +14,12 @@ And frames.pvd, parsed as XML: one DataSet per written frame, in order, each nam
 exists, with timestep frame / fps in seconds.
 Usage: check_vtk.py GRAINS_BINARY SOURCE_DIR WORK_DIR
 """
-import json
 import os
 import shutil
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
+
+import rope_run
 
 try:
     import numpy as np
@@ -159,24 +159,11 @@ def check_frame(vtp, ply, time, failures):
 
 
 def main():
-    grains, src, work = sys.argv[1], sys.argv[2], sys.argv[3]
+    grains, src, work = rope_run.arguments()
     shutil.rmtree(work, ignore_errors=True)
-    os.makedirs(work)
-    example = os.path.abspath(os.path.join(src, "graphs", "rope.json"))
-    with open(example, encoding="utf-8") as f:
-        graph = json.load(f)
-    # the copy reads the example's files where they are
-    for node in graph["nodes"]:
-        if "file" in node.get("params", {}):
-            node["params"]["file"] = os.path.join(os.path.dirname(example), node["params"]["file"])
-    graph.pop("$schema", None)
-    out = os.path.join(work, "out")
-    graph["output"] = {"dir": out, "every": EVERY, "attributes": ATTRIBUTES,
-                       "formats": ["ply", "vtp"]}
-    path = os.path.join(work, "rope.json")
-    with open(path, "w", encoding="utf-8") as f:
-        json.dump(graph, f)
-    subprocess.run([grains, "run", path, "--frames", str(FRAMES), "--quiet"], check=True)
+    graph, out = rope_run.run_rope(grains, src, work, FRAMES,
+                                   {"every": EVERY, "attributes": ATTRIBUTES,
+                                    "formats": ["ply", "vtp"]})
 
     failures = []
     fps = graph["fps"]

@@ -4,17 +4,9 @@
 #include <filesystem>
 #include <map>
 
+#include "tests/support/png.h"
 #include "tests/support/support.h"
 #include "viewer-offline/plot.h"
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
-#pragma GCC diagnostic ignored "-Wsign-compare"
-#define STB_IMAGE_STATIC
-#define STB_IMAGE_IMPLEMENTATION
-#include <stb_image.h>
-#pragma GCC diagnostic pop
 
 using namespace grains;
 namespace fs = std::filesystem;
@@ -40,13 +32,16 @@ std::string stats(int frames, double scale) {
 }
 
 // The PNG's pixels as (r, g, b) counts, and its size.
-std::map<std::tuple<int, int, int>, int> colours(const std::string& png, int& w, int& h) {
-  int n = 0;
-  unsigned char* data = stbi_load(png.c_str(), &w, &h, &n, 3);
-  REQUIRE(data);
+std::map<std::tuple<int, int, int>, int> colours(const std::string& path, int& w, int& h) {
+  const std::optional<test::Png> png = test::read_png(path);
+  REQUIRE(png);
+  w = png->w, h = png->h;
   std::map<std::tuple<int, int, int>, int> out;
-  for (int k = 0; k < w * h; ++k) ++out[{data[3 * k], data[3 * k + 1], data[3 * k + 2]}];
-  stbi_image_free(data);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const unsigned char* q = png->at(x, y);
+      ++out[{q[0], q[1], q[2]}];
+    }
   return out;
 }
 

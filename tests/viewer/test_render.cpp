@@ -14,17 +14,9 @@
 
 #include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
+#include "tests/support/png.h"
 #include "tests/support/support.h"
 #include "viewer-offline/render.h"
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
-#pragma GCC diagnostic ignored "-Wsign-compare"
-#define STB_IMAGE_STATIC
-#define STB_IMAGE_IMPLEMENTATION
-#include <stb_image.h>
-#pragma GCC diagnostic pop
 
 using namespace grains;
 using namespace grains::viewer;
@@ -87,11 +79,6 @@ void pinhole(Vec3 eye, Vec3 target, float fov_deg, int w, int h, Vec3 p, float* 
   float z = dot(d, f);
   *px = 0.5f * w + *focal * dot(d, r) / z;
   *py = 0.5f * h - *focal * dot(d, u) / z;
-}
-
-bool png_size(const std::string& path, int* w, int* h) {
-  int n = 0;
-  return stbi_info(path.c_str(), w, h, &n) == 1;
 }
 
 }  // namespace
@@ -369,13 +356,13 @@ TEST_CASE("render command: a folder of 2 frames gives 2 PNGs and a contact sheet
   o.camera = "0.2,0.3,3,0.2,0.3,0,30";  // the hot grain sits left of the colour bar's panel
   REQUIRE(render_command(o) == 0);
   int w = 0, h = 0;
-  REQUIRE(png_size(dir + "/render/frame_0001.png", &w, &h));
+  REQUIRE(test::png_size(dir + "/render/frame_0001.png", &w, &h));
   CHECK(w == 96);
   CHECK(h == 64);
-  REQUIRE(png_size(dir + "/render/frame_0002.png", &w, &h));
+  REQUIRE(test::png_size(dir + "/render/frame_0002.png", &w, &h));
   CHECK_FALSE(std::filesystem::exists(dir + "/render/frame_0003.png"));
   ContactSheetLayout l = contact_sheet_layout(2, 96, 64);
-  REQUIRE(png_size(dir + "/render/contact_sheet.png", &w, &h));
+  REQUIRE(test::png_size(dir + "/render/contact_sheet.png", &w, &h));
   CHECK(w == l.width);
   CHECK(h == l.height);
   CHECK(w == 2 * 24 + 3 * 4);  // two thumbnails of 96/4 x 64/4 with 4-pixel gaps
@@ -387,18 +374,16 @@ TEST_CASE("render command: a folder of 2 frames gives 2 PNGs and a contact sheet
     cam.project({0, 0.3f, 0.1f}, &px, &py, nullptr);
     Rect bar = color_bar_rect(96, 64);
     for (int f = 1; f <= 2; ++f) {
-      int iw, ih, n;
-      std::string path = dir + "/render/frame_000" + std::to_string(f) + ".png";
-      unsigned char* data = stbi_load(path.c_str(), &iw, &ih, &n, 3);
-      REQUIRE(data);
+      const std::optional<test::Png> png =
+          test::read_png(dir + "/render/frame_000" + std::to_string(f) + ".png");
+      REQUIRE(png);
       auto at = [&](int x, int y) {
-        const unsigned char* q = data + 3 * (y * iw + x);
+        const unsigned char* q = png->at(x, y);
         return Px{q[0], q[1], q[2]};
       };
       Px grain = at(static_cast<int>(px), static_cast<int>(py));
       Px end = at((bar.x0 + bar.x1) / 2, f == 1 ? bar.y1 - 1 : bar.y0);
       CHECK(grain == end);
-      stbi_image_free(data);
     }
   }
 }
@@ -591,14 +576,11 @@ TEST_CASE("render command: a collider placed by $OBJID and $NOBJ is drawn where 
   std::snprintf(caption, sizeof caption, "frame %d  t %.3f s  %zu grains", 2, 2 / 24.0,
                 pa.size() + pb.size());
   draw_caption(expected, caption);
-  int w = 0, h = 0, n = 0;
-  unsigned char* data = stbi_load((o.out + "/frame_0002.png").c_str(), &w, &h, &n, 3);
-  REQUIRE(data);
-  REQUIRE(w == 96);
-  REQUIRE(h == 64);
-  const bool same = std::equal(expected.rgb.begin(), expected.rgb.end(), data);
-  stbi_image_free(data);
-  CHECK(same);
+  const std::optional<test::Png> png = test::read_png(o.out + "/frame_0002.png");
+  REQUIRE(png);
+  REQUIRE(png->w == 96);
+  REQUIRE(png->h == 64);
+  CHECK(std::equal(expected.rgb.begin(), expected.rgb.end(), png->rgb.begin()));
   // and not the one a viewer evaluating the graph for itself drew (OBJID 0, NOBJ 1 for every
   // object): there, solver b's ball was missing
   std::vector<ColliderState> object_a_only(used[2].begin(), used[2].begin() + 2);

@@ -855,9 +855,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
     // passes in most substeps, most of the substep's work, all of it without friction.
     const int stabilize_max = std::min(kStabilizeIterations, iterations);
-    // the passes add each contact's normal corrections to the friction pass's sums, as the
+    // the passes add each grain pair's normal corrections to the friction pass's sums, as the
     // iterations do (gr_stabilize)
-    const bool sums = acc.pair || acc.collider;
+    const bool sums = acc.pair != nullptr;
     for (int k = 0; k < stabilize_max; ++k) {
       const float* x = P_stable_.data();
       float* next = p_stable_next_.data();
@@ -866,6 +866,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       {
         gr_normal_sums mine = acc;
         if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
+        mine.collider = nullptr;  // grain pairs only: see gr_stabilize
 #pragma omp for schedule(static)
         for (long i = 0; i < ln; ++i) {
           const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i), sums ? &mine : nullptr);

@@ -130,9 +130,11 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
  * overlap left from earlier substeps or made by emission is removed without turning into
  * velocity: resolved inside a substep, an overlap d becomes a speed d / dt, which grows as the
  * substeps shrink. prm must have clumping off.
- * acc (or null): each contact's overlap / n_i joins the friction pass's sums (acc->pair,
- * acc->collider) as the iterations' do, so the substep's Coulomb bound counts the normal
- * corrections of these passes too. Where the iterations leave overlap (deep in a pile, a
+ * acc (or null): each grain pair's overlap / n_i joins the friction pass's sums (acc->pair)
+ * as the iterations' do, so the substep's Coulomb bound counts the normal corrections of these
+ * passes too. Collider planes (acc->collider null here) keep the iterations' own: a grain that
+ * crossed a thin collider within a substep would otherwise take the pass's push out of it as
+ * friction against the face (tests "the final collision test applies collider friction..."). Where the iterations leave overlap (deep in a pile, a
  * landing grain), these passes do much of a contact's pushing; a bound without it let such
  * contacts slide kinetically: the DEM pile stood at 45.4° with it left out, 48.0° with it
  * (docs/heap-angle.md). Their own tangential moves stay unresisted. */

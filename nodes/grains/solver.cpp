@@ -855,25 +855,16 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
     // passes in most substeps, most of the substep's work, all of it without friction.
     const int stabilize_max = std::min(kStabilizeIterations, iterations);
-    // the passes add each grain pair's normal corrections to the friction pass's sums, as the
-    // iterations do (gr_stabilize)
-    const bool sums = acc.pair != nullptr;
     for (int k = 0; k < stabilize_max; ++k) {
       const float* x = P_stable_.data();
       float* next = p_stable_next_.data();
       float moved = 0;
-#pragma omp parallel num_threads(threads) reduction(max : moved)
-      {
-        gr_normal_sums mine = acc;
-        if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
-        mine.collider = nullptr;  // grain pairs only: see gr_stabilize
-#pragma omp for schedule(static)
-        for (long i = 0; i < ln; ++i) {
-          const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i), sums ? &mine : nullptr);
-          const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
-          moved = std::max(moved, gr_length(d) / radius_[i]);
-          gr_store3(next, i, y);
-        }
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved)
+      for (long i = 0; i < ln; ++i) {
+        const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i));
+        const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
+        moved = std::max(moved, gr_length(d) / radius_[i]);
+        gr_store3(next, i, y);
       }
       P_stable_.swap(p_stable_next_);
       if (!(moved > kStabilizeTolerance)) break;

@@ -76,32 +76,6 @@ GR_INLINE void gr_add_collider_dx(GR_GLOBAL float* collider_dx, int i, gr_float3
   }
 }
 
-/* adds grain i's overlaps of this pass (acc->pair_iteration, per row entry, and pen, per
- * plane), each over the grain's constraint count, to the friction pass's sums */
-GR_INLINE void gr_add_normal_sums(const gr_grains* g, const gr_params* prm,
-                                  const gr_normal_sums* acc, int i, const float* pen, int count) {
-  if (!acc->pair && !acc->collider) return;
-  float share = (prm->disable_constraint_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
-  if (acc->pair && g->nbr_offsets) {
-    gr_uint k;
-    /* bounds read once: the stores below could otherwise alias them, and the loop would not
-     * vectorise */
-    const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
-    /* in the contact loop's blocks of GR_LANES, the stores the scratch row was just written
-     * with: the compiler's loop read it 16 floats at a time from where the sums' alignment put
-     * it, so each load spanned two of those stores and waited for them to reach the cache */
-    for (k = b; k + GR_LANES <= e; k += GR_LANES)
-      gr_add_block(acc->pair + k, acc->pair_iteration + (k - b), share);
-    for (; k < e; ++k)
-      acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
-  }
-  if (acc->collider && g->plane_offsets) {
-    const gr_uint b = g->plane_offsets[i], e = g->plane_offsets[i + 1];
-    gr_uint k;
-    for (k = b; k < e; ++k) acc->collider[k] += pen[k - b] * share;
-  }
-}
-
 /* constraint loop: contacts, clumping, collider planes,
  * explicit constraints, pins */
 GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const GR_GLOBAL float* p,
@@ -120,7 +94,27 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   if (acc->collider_dx && ccount)
     gr_add_collider_dx(acc->collider_dx, i, csum,
                        gr_average_factor(count, prm->over_relaxation, prm->disable_constraint_averaging), pen);
-  gr_add_normal_sums(g, prm, acc, i, pen, count);
+  if (acc->pair || acc->collider) {
+    float share = (prm->disable_constraint_averaging || count == 0) ? 1.0f : 1.0f / (float)count;
+    if (acc->pair && g->nbr_offsets) {
+      gr_uint k;
+      /* bounds read once: the stores below could otherwise alias them, and the loop would not
+       * vectorise */
+      const gr_uint b = g->nbr_offsets[i], e = g->nbr_offsets[i + 1];
+      /* in the contact loop's blocks of GR_LANES, the stores the scratch row was just written
+       * with: the compiler's loop read it 16 floats at a time from where the sums' alignment put
+       * it, so each load spanned two of those stores and waited for them to reach the cache */
+      for (k = b; k + GR_LANES <= e; k += GR_LANES)
+        gr_add_block(acc->pair + k, acc->pair_iteration + (k - b), share);
+      for (; k < e; ++k)
+        acc->pair[k] = gr_as_uint(gr_as_float(acc->pair[k]) + acc->pair_iteration[k - b] * share);
+    }
+    if (acc->collider && g->plane_offsets) {
+      const gr_uint b = g->plane_offsets[i], e = g->plane_offsets[i + 1];
+      gr_uint k;
+      for (k = b; k < e; ++k) acc->collider[k] += pen[k - b] * share;
+    }
+  }
   return gr_average(gr_load3(p, i), sum, count, prm->over_relaxation, prm->disable_constraint_averaging);
 }
 
@@ -129,23 +123,14 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
  * The solver moves both the start and the predicted position of each grain by the result, so
  * overlap left from earlier substeps or made by emission is removed without turning into
  * velocity: resolved inside a substep, an overlap d becomes a speed d / dt, which grows as the
- * substeps shrink. prm must have clumping off.
- * acc (or null): each grain pair's overlap / n_i joins the friction pass's sums (acc->pair)
- * as the iterations' do, so the substep's Coulomb bound counts the normal corrections of these
- * passes too. Collider planes (acc->collider null here) keep the iterations' own: a grain that
- * crossed a thin collider within a substep would otherwise take the pass's push out of it as
- * friction against the face (tests "the final collision test applies collider friction..."). Where the iterations leave overlap (deep in a pile, a
- * landing grain), these passes do much of a contact's pushing; a bound without it let such
- * contacts slide kinetically: the DEM pile stood at 45.4° with it left out, 48.0° with it
- * (docs/heap-angle.md). Their own tangential moves stay unresisted. */
+ * substeps shrink. prm must have clumping off. */
 GR_INLINE gr_float3 gr_stabilize(const gr_grains* g, const gr_params* prm,
-                                 const GR_GLOBAL float* x, int i, const gr_normal_sums* acc) {
+                                 const GR_GLOBAL float* x, int i) {
   gr_float3 sum = gr_make3(0.0f, 0.0f, 0.0f);
   int count = 0;
   float pen[GR_MAX_PLANES];
-  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, x, i, acc ? acc->pair_iteration : 0, &sum);
+  if (g->nbr_offsets) count += gr_gather_pairs(g, prm, x, i, 0, &sum);
   if (g->plane_offsets) count += gr_gather_collider(g, prm, x, i, pen, &sum);
-  if (acc && count) gr_add_normal_sums(g, prm, acc, i, pen, count);
   return gr_average(gr_load3(x, i), sum, count, 1.0f, prm->disable_constraint_averaging);
 }
 

@@ -83,6 +83,52 @@ TEST_CASE("the README's example commands run as written and leave the files it n
     INFO(file);
     CHECK(fs::is_regular_file(dir + "/" + file));
   }
+
+  // "Viewing results", on the run the example made: grains' own commands run as written (the
+  // text after '#' is a comment); the ParaView line needs the graph's output to ask for vtp, as
+  // it says, and then frames.pvd names frames that exist (ParaView itself is not installed here;
+  // the vtk_client test opens such a run with VTK's reader)
+  const auto viewing = fenced_blocks(section(readme, "## Viewing results"));
+  REQUIRE(!viewing.empty());
+  std::vector<std::string> view_commands = lines_of(viewing[0].second);
+  REQUIRE(view_commands.size() == 3);
+  for (std::string command : view_commands) {
+    command = command.substr(0, command.find('#'));
+    while (!command.empty() && command.back() == ' ') command.pop_back();
+    INFO(command);
+    if (command.rfind("paraview ", 0) == 0) {
+      CHECK(command == "paraview out/first/frames.pvd");
+      CHECK(viewing[0].second.find("\"formats\": [\"ply\", \"vtp\"]") != std::string::npos);
+      continue;
+    }
+    REQUIRE(command.rfind("build/grains ", 0) == 0);
+    const std::string args = command.substr(std::string("build/grains ").size());
+    const std::string line = "cd '" + dir + "' && '" + GRAINS_BINARY + "' " + args + " > '" + dir +
+                             "/log.txt' 2>&1";
+    CHECK(std::system(line.c_str()) == 0);
+  }
+  for (const char* file : {"out/first/first.mp4", "out/first/stats.png"}) {
+    INFO(file);
+    CHECK(fs::is_regular_file(dir + "/" + file));
+    CHECK(fs::file_size(dir + "/" + file) > 1000);
+  }
+  // the graph with "formats": ["ply", "vtp"] in its output, as the ParaView line says
+  std::string graph = test::read_text(dir + "/graphs/default.json");
+  const std::string output = "\"output\": {";
+  const size_t at = graph.find(output);
+  REQUIRE(at != std::string::npos);
+  graph.insert(at + output.size(), "\"formats\": [\"ply\", \"vtp\"], ");
+  test::write_file(dir + "/graphs", "vtp.json", graph);
+  const std::string line = "cd '" + dir + "' && '" + GRAINS_BINARY +
+                           "' run graphs/vtp.json --out out/first --frames 3 --quiet --overwrite > '" +
+                           dir + "/log.txt' 2>&1";
+  REQUIRE(std::system(line.c_str()) == 0);
+  const std::string pvd = test::read_text(dir + "/out/first/frames.pvd");
+  for (const char* frame : {"frame_0001.vtp", "frame_0003.vtp"}) {
+    INFO(frame);
+    CHECK(pvd.find(frame) != std::string::npos);
+    CHECK(fs::is_regular_file(dir + "/out/first/" + frame));
+  }
 }
 
 TEST_CASE("every command line the README shows is a subcommand with the options it lists",

@@ -59,7 +59,8 @@ enum Packing { kCubic, kHexagonal };
   ROW(MENU, packing, kCubic, .menu_of({"grid", "hexagonal"}), "cubic grid or hexagonal close packing") \
   ROW(FLOAT, jitter, 0, .range(0, 1), "random offset of each grain, as a fraction of the separation") \
   ROW(MENU, emission, kOnce, .menu_of({"once", "rate"}),                                            \
-      "emit the whole fill once at `birth_frame`, or random points at `rate`")                     \
+      "emit the whole fill once at `birth_frame`, or random points at `rate`: in the box, sphere " \
+      "or grid, or picked among the file's points or the mask's sheet")                            \
   ROW(INT, birth_frame, 1, .at_least(1), "frame of the one-time emission")                          \
   ROW(FLOAT, rate, 100, .at_least(0).unit("1/s"), "grains per second while emitting at a rate")     \
   ROW(INT, start_frame, 1, .at_least(1), "first frame of rate emission")                            \
@@ -95,15 +96,31 @@ class SourceNode : public Node {
       int count = static_cast<int>(std::floor(carry_));
       carry_ -= count;
       std::vector<Vec3> pts;
-      for (int k = 0; k < count; ++k) pts.push_back(random_point(ctx));
+      std::vector<uint32_t> picks;
+      if (p.shape == kFile || p.shape == kImage) {
+        // random points of the file or of the mask's sheet, as POP Source emits from a
+        // geometry's points at a rate: each pick uniform among them, with replacement
+        const std::vector<Vec3>& from = shape_points(ctx);
+        const Vec3 c = p.center;
+        for (int k = 0; k < count && !from.empty(); ++k) {
+          const float u = rand01(ctx.seed, 3 * counter_++);
+          const uint32_t pick =
+              std::min(static_cast<uint32_t>(from.size() - 1), static_cast<uint32_t>(u * from.size()));
+          picks.push_back(pick);
+          pts.push_back(from[pick] + c);
+        }
+      } else {
+        for (int k = 0; k < count; ++k) pts.push_back(random_point(ctx));
+      }
       size_t first = ctx.pts.size();
       emit(ctx, pts);
+      if (p.shape == kFile && !pts.empty()) copy_file_attributes(ctx, first, &picks);
       connect(ctx, first);
     }
   }
 
   // the emission clock: whether a `once` source has emitted, the part of a grain a `rate`
-  // source owes, the random draws taken (file_ is read and dropped within one cook)
+  // source owes, the random draws taken (file_ and shape_pts_ are inputs read again, not state)
   void save_state(StateWriter& w) const override {
     w.section("source");
     w.value(emitted_);
@@ -297,6 +314,31 @@ class SourceNode : public Node {
     return s;
   }
 
+  // The points a rate emission picks from, about the origin (the centre is added per pick, so
+  // it may move): the file's points, or the mask's sheet. Read once per file and sheet size,
+  // separation and threshold; a cache of the inputs, not run state (a resumed run reads them
+  // again).
+  const std::vector<Vec3>& shape_points(CookContext& ctx) {
+    const SourceParams& p = p_;
+    const std::string key = p.shape.text + "|" + resolve_path(ctx.base_dir, p.file) + "|" +
+                            (p.shape == kImage ? std::to_string(p.size.x) + "," +
+                                                     std::to_string(p.size.z) + "," +
+                                                     std::to_string(p.separation) + "," +
+                                                     std::to_string(p.threshold)
+                                               : std::string());
+    if (key == shape_key_) return shape_pts_;
+    shape_pts_.clear();
+    if (p.shape == kFile) {
+      file_ = read_ply_or_obj(ctx);
+      const float* P = file_.v3_if("P");
+      for (size_t k = 0; k < file_.size(); ++k) shape_pts_.push_back(load3(P, k));
+    } else {
+      shape_pts_ = image_sheet(ctx, Vec3{0, 0, 0}, p.size, static_cast<float>(p.separation));
+    }
+    shape_key_ = key;
+    return shape_pts_;
+  }
+
   void emit(CookContext& ctx, const std::vector<Vec3>& pts) {
     if (pts.empty()) return;
     const SourceParams& p = p_;
@@ -328,25 +370,32 @@ class SourceNode : public Node {
   }
 
   // The file's own point attributes (pscale, v, mass, targetP, ...) override the source's
-  // defaults, and its edges become constraints between the new points.
-  void copy_file_attributes(CookContext& ctx, size_t first) {
+  // defaults. Without picks the new points are the file's, in order, and its edges become
+  // constraints between them; with picks (a rate emission) new point k is the file's point
+  // picks[k], and edges, which join points of one copy of the file, are not made.
+  void copy_file_attributes(CookContext& ctx, size_t first,
+                            const std::vector<uint32_t>* picks = nullptr) {
     ParticleStore& s = ctx.pts;
+    const size_t count = picks ? picks->size() : file_.size();
+    auto from = [&](size_t k) -> size_t { return picks ? (*picks)[k] : k; };
     for (const auto& [name, a] : file_.attributes()) {
       // the stream and per-substep state belong to this source, not the file
       if (name == "P" || name == "id" || name == "streamid" || name == "ispbd" || name == "force")
         continue;
       Attribute& dst = s.add(name, a.type);
-      int c = a.components();
-      if (a.type == AttribType::Int)
-        std::copy(a.i.begin(), a.i.end(), dst.i.begin() + first);
-      else
-        std::copy(a.f.begin(), a.f.end(), dst.f.begin() + first * c);
+      const size_t c = static_cast<size_t>(a.components());
+      for (size_t k = 0; k < count; ++k) {
+        if (a.type == AttribType::Int) dst.i[first + k] = a.i[from(k)];
+        else
+          std::copy_n(a.f.begin() + from(k) * c, c, dst.f.begin() + (first + k) * c);
+      }
     }
     if (file_.has("v")) {  // the initial velocity adds to the file's
       Vec3 vel = p_.velocity;
       float* v = s.v3("v");
-      for (size_t k = 0; k < file_.size(); ++k) store3(v, first + k, load3(v, first + k) + vel);
+      for (size_t k = 0; k < count; ++k) store3(v, first + k, load3(v, first + k) + vel);
     }
+    if (picks) return;  // the file stays for the next picks (shape_points)
     const std::vector<int32_t>& e = file_.prim_points();
     for (size_t p = 0; p < file_.prim_count(); ++p) {
       size_t q = s.add_prim(static_cast<int32_t>(first) + e[2 * p], static_cast<int32_t>(first) + e[2 * p + 1]);
@@ -357,6 +406,8 @@ class SourceNode : public Node {
 
   SourceParams p_;  // this cook's parameters
   ParticleStore file_;
+  std::string shape_key_;         // what shape_pts_ were made from
+  std::vector<Vec3> shape_pts_;   // a rate emission's points to pick from (shape_points)
   bool emitted_ = false;
   double carry_ = 0;
   uint64_t counter_ = 0;

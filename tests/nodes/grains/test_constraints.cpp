@@ -6,7 +6,9 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <set>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -435,4 +437,78 @@ TEST_CASE("source image turns a mask into a connected sheet", "[grains][constrai
   CHECK(xmax < 0.0f);  // the opaque half is the left (-x) half
   img["threshold"] = 1.0;  // nothing exceeds full coverage
   CHECK(emitted(img).size() == 0);
+}
+
+namespace {
+
+// The points after `frames` frames of a graph with one source "src" (params merged in) and no
+// forces: each grain stays where it was born.
+ParticleStore emitted_over(const nlohmann::json& params, int frames) {
+  nlohmann::json src = {{"name", "src"}, {"type", "source"}, {"params", params}};
+  nlohmann::json g = {{"grains_graph", 1}, {"fps", 24}, {"frames", frames}, {"seed", 1},
+                      {"nodes", {src, {{"name", "s"}, {"type", "solver"}, {"inputs", {"src"}}}}}};
+  Graph graph = test::graph_from(g.dump(), test::source_dir() + "/tests/constraints.json");
+  Simulation sim(graph, 1);
+  for (int f = 0; f < frames; ++f) sim.step_frame();
+  return sim.object(0).pts;
+}
+
+}  // namespace
+
+TEST_CASE("source at a rate from a file picks the file's points, with their attributes",
+          "[source]") {
+  // 40 points on the plane y = 0.5 (an 8 x 5 grid at 0.1 m), each with its own pscale. At 240
+  // grains a second and 24 fps a frame emits 10 grains: after 3 frames 30, every one on a point
+  // of the file moved by `center`, carrying that point's pscale. The box fill it used to fall
+  // back to would have scattered them through the default 1 m box.
+  const std::string dir = test::temp_dir("rate_file");
+  std::string ply = "ply\nformat ascii 1.0\nelement vertex 40\nproperty float x\nproperty float y\n"
+                    "property float z\nproperty float pscale\nend_header\n";
+  for (int k = 0; k < 40; ++k)
+    ply += std::to_string(0.1 * (k % 8)) + " 0.5 " + std::to_string(0.1 * (k / 8)) + " " +
+           std::to_string(0.01 + 0.001 * k) + "\n";
+  const std::string file = test::write_file(dir, "plane.ply", ply);
+  nlohmann::json src = {{"shape", "file"}, {"file", file}, {"emission", "rate"}, {"rate", 240},
+                        {"center", {1, 0, 0}}, {"separation", 0.1}};
+  ParticleStore s = emitted_over(src, 3);
+  REQUIRE(s.size() == 30);
+  const float* P = s.v3_if("P");
+  const float* r = s.f_if("pscale");
+  std::set<int> picked;
+  for (size_t i = 0; i < s.size(); ++i) {
+    INFO("grain " << i << " at " << P[3 * i] << ", " << P[3 * i + 1] << ", " << P[3 * i + 2]);
+    CHECK(P[3 * i + 1] == Approx(0.5f));
+    const int kx = static_cast<int>(std::lround((P[3 * i] - 1) / 0.1));
+    const int kz = static_cast<int>(std::lround(P[3 * i + 2] / 0.1));
+    REQUIRE(kx >= 0);
+    REQUIRE(kx < 8);
+    REQUIRE(kz >= 0);
+    REQUIRE(kz < 5);
+    CHECK(P[3 * i] == Approx(1 + 0.1 * kx).margin(1e-5));
+    CHECK(P[3 * i + 2] == Approx(0.1 * kz).margin(1e-5));
+    CHECK(r[i] == Approx(0.01 + 0.001 * (8 * kz + kx)).margin(1e-6));
+    picked.insert(8 * kz + kx);
+  }
+  // 30 uniform picks among 40 points: about 40 (1 - (39/40)^30) = 21 distinct (sd about 2)
+  CHECK(picked.size() >= 12);
+}
+
+TEST_CASE("source at a rate from an image mask picks grains of its sheet", "[source]") {
+  // tests/data/mask_half.png, opaque in its left half: a 240/s emission for 4 frames gives 40
+  // grains, all on the sheet's plane y = 0.5 and in its left half (the sheet's x from -0.95 to
+  // -0.05), on its 0.1 m grid
+  nlohmann::json img = {{"shape", "image"}, {"file", "data/mask_half.png"}, {"size", {1.9, 0, 0.9}},
+                        {"separation", 0.1}, {"center", {0, 0.5, 0}}, {"emission", "rate"},
+                        {"rate", 240}};
+  ParticleStore s = emitted_over(img, 4);
+  REQUIRE(s.size() == 40);
+  const float* P = s.v3_if("P");
+  for (size_t i = 0; i < s.size(); ++i) {
+    INFO("grain " << i << " at " << P[3 * i] << ", " << P[3 * i + 2]);
+    CHECK(P[3 * i + 1] == Approx(0.5f));
+    CHECK(P[3 * i] < 0.0f);
+    CHECK(P[3 * i] >= -0.95f - 1e-5f);
+    const double cells = (P[3 * i] + 0.95) / 0.1;
+    CHECK(std::fabs(cells - std::round(cells)) < 1e-3);
+  }
 }

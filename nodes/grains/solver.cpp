@@ -643,7 +643,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
           store3(rest_offset_.data(), comp_members_[k], load3(d.P, comp_members_[k]) - centre);
       }
     }
-    shape_goal_.resize(3 * n);
+    // 3 n + 1, as p_: project_shapes swaps the two, and the contact loop's block load reads
+    // one float past a grain's three (gr_load_block; AddressSanitizer caught the last grain's)
+    shape_goal_.resize(3 * n + 1);
   }
 
   // explicit constraints (constraints_on above)

@@ -808,7 +808,7 @@ void write_ply_all(const std::string& path, const ParticleStore& pts) {
   write_elements(path, {vertex, edge_element(path, pts, true)});
 }
 
-ParticleStore read_ply(const std::string& path) {
+ParticleStore read_ply(const std::string& path, std::vector<std::string>* from_file) {
   PlyReader r(path);
   const auto& elements = r.elements();
   int vi = -1, ei = -1;
@@ -824,6 +824,12 @@ ParticleStore read_ply(const std::string& path) {
   if (vi < 0) fail(path, "no vertex element");
   const PlyElement& vel = elements[vi];
   const std::vector<std::optional<Dest>> dest = map_vertex_properties(path, vel);
+  if (from_file) {
+    from_file->clear();
+    for (const auto& d : dest)
+      if (d && std::find(from_file->begin(), from_file->end(), d->attr) == from_file->end())
+        from_file->push_back(d->attr);
+  }
   if (vel.count > static_cast<size_t>(std::numeric_limits<int32_t>::max()))
     fail(path, "too many vertices (" + std::to_string(vel.count) + ")");
   EdgeData edges;

@@ -54,7 +54,10 @@ std::string input_file_problem(const std::string& path, uint64_t max_bytes);
 
 // Throws GeometryError (file + what) for a missing file, bad header, no x/y/z, a known attribute
 // of the wrong type (e.g. an int pscale), edge indices out of range, truncated data.
-ParticleStore read_ply(const std::string& path);
+// The store also holds the standard attributes at their defaults (pscale 0.05, mass 1, ...);
+// `from_file`, when given, receives the names of the point attributes the file itself provides
+// (P, v, pscale, ... in the order of its properties), so a caller can tell the two apart.
+ParticleStore read_ply(const std::string& path, std::vector<std::string>* from_file = nullptr);
 
 struct Mesh {
   std::vector<Vec3> vertices;

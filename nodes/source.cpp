@@ -303,9 +303,11 @@ class SourceNode : public Node {
     return c + Vec3{(u.x - 0.5f) * size.x, (u.y - 0.5f) * size.y, (u.z - 0.5f) * size.z};
   }
 
+  // The file's points; file_attributes_ gets the point attributes it provides itself
   ParticleStore read_ply_or_obj(CookContext& ctx) {
     std::string path = resolve_path(ctx.base_dir, p_.file);
-    if (std::filesystem::path(path).extension() == ".ply") return read_ply(path);
+    if (std::filesystem::path(path).extension() == ".ply") return read_ply(path, &file_attributes_);
+    file_attributes_ = {"P"};
     Mesh m = read_mesh(path);
     ParticleStore s;
     s.add_points(m.vertices.size());
@@ -370,7 +372,9 @@ class SourceNode : public Node {
   }
 
   // The file's own point attributes (pscale, v, mass, targetP, ...) override the source's
-  // defaults. Without picks the new points are the file's, in order, and its edges become
+  // parameters; those it lacks keep them (the store read_ply makes holds every standard
+  // attribute, at its defaults: copying those made a file without pscale 0.05 m grains whatever
+  // the separation, and one without mass ignore `mass` and `density`). Without picks the new points are the file's, in order, and its edges become
   // constraints between them; with picks (a rate emission) new point k is the file's point
   // picks[k], and edges, which join points of one copy of the file, are not made.
   void copy_file_attributes(CookContext& ctx, size_t first,
@@ -378,10 +382,11 @@ class SourceNode : public Node {
     ParticleStore& s = ctx.pts;
     const size_t count = picks ? picks->size() : file_.size();
     auto from = [&](size_t k) -> size_t { return picks ? (*picks)[k] : k; };
-    for (const auto& [name, a] : file_.attributes()) {
+    for (const std::string& name : file_attributes_) {
       // the stream and per-substep state belong to this source, not the file
       if (name == "P" || name == "id" || name == "streamid" || name == "ispbd" || name == "force")
         continue;
+      const Attribute& a = *file_.find(name);
       Attribute& dst = s.add(name, a.type);
       const size_t c = static_cast<size_t>(a.components());
       for (size_t k = 0; k < count; ++k) {
@@ -390,7 +395,8 @@ class SourceNode : public Node {
           std::copy_n(a.f.begin() + from(k) * c, c, dst.f.begin() + (first + k) * c);
       }
     }
-    if (file_.has("v")) {  // the initial velocity adds to the file's
+    if (std::find(file_attributes_.begin(), file_attributes_.end(), "v") !=
+        file_attributes_.end()) {  // the initial velocity adds to the file's
       Vec3 vel = p_.velocity;
       float* v = s.v3("v");
       for (size_t k = 0; k < count; ++k) store3(v, first + k, load3(v, first + k) + vel);
@@ -406,6 +412,7 @@ class SourceNode : public Node {
 
   SourceParams p_;  // this cook's parameters
   ParticleStore file_;
+  std::vector<std::string> file_attributes_;  // the point attributes file_'s file provides
   std::string shape_key_;         // what shape_pts_ were made from
   std::vector<Vec3> shape_pts_;   // a rate emission's points to pick from (shape_points)
   bool emitted_ = false;

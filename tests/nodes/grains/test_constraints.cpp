@@ -512,3 +512,38 @@ TEST_CASE("source at a rate from an image mask picks grains of its sheet", "[sou
     CHECK(std::fabs(cells - std::round(cells)) < 1e-3);
   }
 }
+
+TEST_CASE("source from a file keeps its own pscale and mass where the file has none", "[source]") {
+  // A file of x y z only: the grains take the source's radius (separation / 2 = 5 mm) and its
+  // density's mass (2500 kg/m^3: 1.309e-3 kg), once and at a rate. A file with its own pscale
+  // and mass columns overrides both.
+  const std::string dir = test::temp_dir("file_defaults");
+  const std::string bare = test::write_file(
+      dir, "bare.ply",
+      "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+      "property float z\nend_header\n0 0.5 0\n0.1 0.5 0\n");
+  const std::string own = test::write_file(
+      dir, "own.ply",
+      "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+      "property float z\nproperty float pscale\nproperty float mass\nend_header\n"
+      "0 0.5 0 0.02 3\n0.1 0.5 0 0.03 4\n");
+  const double mass = 2500 * 4.0 / 3.0 * M_PI * 0.005 * 0.005 * 0.005;
+  for (const char* emission : {"once", "rate"}) {
+    INFO(emission);
+    nlohmann::json src = {{"shape", "file"}, {"file", bare}, {"separation", 0.01},
+                          {"density", 2500}, {"emission", emission}, {"rate", 240}};
+    ParticleStore s = emitted_over(src, 1);
+    REQUIRE(s.size() >= 2);
+    for (size_t i = 0; i < s.size(); ++i) {
+      CHECK(s.f_if("pscale")[i] == Approx(0.005));
+      CHECK(s.f_if("mass")[i] == Approx(mass).epsilon(1e-5));
+    }
+  }
+  nlohmann::json src = {{"shape", "file"}, {"file", own}, {"separation", 0.01}, {"density", 2500}};
+  ParticleStore s = emitted_over(src, 1);
+  REQUIRE(s.size() == 2);
+  CHECK(s.f_if("pscale")[0] == Approx(0.02));
+  CHECK(s.f_if("pscale")[1] == Approx(0.03));
+  CHECK(s.f_if("mass")[0] == Approx(3));
+  CHECK(s.f_if("mass")[1] == Approx(4));
+}

@@ -15,7 +15,7 @@ namespace grains {
 namespace {
 
 constexpr const char* kNameChars =
-    "0123456789_abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ$";
+    "0123456789_abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ$@";
 
 bool is_name_char(char c) {
   return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' ||
@@ -239,9 +239,12 @@ struct Expression::Impl {
   // strings the parser was last compiled with
   std::string last_objname, last_dopnet;
 
-  Impl(const std::string& t, const std::vector<std::string>& names) : text(t), tmpl(t) {
+  Impl(const std::string& t, const std::vector<std::string>& names,
+       const std::vector<std::pair<std::string, double*>>& bound)
+      : text(t), tmpl(t) {
     try {
       parser.DefineNameChars(kNameChars);
+      for (const auto& [n, value] : bound) parser.DefineVar(n, value);
       for (size_t k = 0; k < kNumLocals; ++k) {
         const std::string n = kLocalNames[k];
         parser.DefineVar(n, &locals[k]);
@@ -317,8 +320,9 @@ struct Expression::Impl {
   }
 };
 
-Expression::Expression(const std::string& text, const std::vector<std::string>& channel_names)
-    : impl_(std::make_unique<Impl>(text, channel_names)) {}
+Expression::Expression(const std::string& text, const std::vector<std::string>& channel_names,
+                       const std::vector<std::pair<std::string, double*>>& bound)
+    : impl_(std::make_unique<Impl>(text, channel_names, bound)) {}
 Expression::~Expression() = default;
 Expression::Expression(Expression&&) noexcept = default;
 Expression& Expression::operator=(Expression&&) noexcept = default;

@@ -43,7 +43,10 @@ class Expression {
  public:
   // channel_names: the node's channel names, readable as local variables (previous values).
   // Throws ExprError if the text does not parse.
-  Expression(const std::string& text, const std::vector<std::string>& channel_names);
+  // bound: further variables, each read from its double at every eval (the attribute node's
+  // point variables: ID, PT, TX, @name, ...); names may start with '@'.
+  Expression(const std::string& text, const std::vector<std::string>& channel_names,
+             const std::vector<std::pair<std::string, double*>>& bound = {});
   ~Expression();
   Expression(Expression&&) noexcept;
   Expression& operator=(Expression&&) noexcept;

@@ -10,6 +10,7 @@ void register_builtin_nodes() {
   register_force_node();
   register_merge_node();
   register_kill_node();
+  register_attribute_node();
   register_collider_node();
   register_solver_node();
   register_grains_node();

@@ -10,6 +10,7 @@ void register_group_node();
 void register_force_node();
 void register_merge_node();
 void register_kill_node();
+void register_attribute_node();
 void register_collider_node();
 void register_solver_node();
 void register_grains_node();

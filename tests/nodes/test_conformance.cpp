@@ -125,6 +125,7 @@ std::map<std::string, Scene> scenes() {
   s["force"] = pop("force", {{"force", {0.5, 1, 0}}});
   s["group"] = pop("group", {{"group_name", "g1"}, {"size", {0.5, 0.3, 0.5}}});
   s["kill"] = pop("kill", {{"center", {0, 0.5, 0}}, {"size", {0.3, 0.3, 0.3}}});
+  s["attribute"] = pop("attribute", {{"attribute", "friction"}, {"value", "$TY"}});
   s["grains"] = [](const json& p) {
     json n = {{"name", "n"}, {"type", "grains"}, {"inputs", {"g"}},
               {"params", {{"particle_separation", 0.1}, {"constraint_iterations", 6},
@@ -255,6 +256,10 @@ std::map<std::string, Special> specials() {
       // kill
       {"kill.radius", {{{"shape", "sphere"}}, 0.3}},
       {"kill.activation", {json::object(), 0}},
+      // attribute
+      {"attribute.activation", {json::object(), 0}},
+      {"attribute.type", {{{"attribute", "made"}}, "vector"}},
+      {"attribute.value", {json::object(), "2 * $TY"}},
       // collider
       {"collider.shape", {json::object(), "sphere"}},
       {"collider.radius", {{{"shape", "sphere"}}, 0.4}},

@@ -222,10 +222,63 @@ struct StringTemplate {
   }
 };
 
-constexpr size_t kNumLocals = 14;
+constexpr size_t kNumLocals = 15;
 constexpr std::array<const char*, kNumLocals> kLocalNames = {
-    "ST",  "SF",    "T",     "F",     "TIMESTEP", "SFPS",   "OBJ",
-    "OBJID", "NOBJ", "SNOBJ", "OBJCT", "OBJCF",    "DATACT", "DATACF"};
+    "ST",  "SF",    "T",     "F",     "TIMESTEP", "SFPS",   "OBJ",  "OBJID",
+    "NOBJ", "SNOBJ", "OBJCT", "OBJCF", "DATACT",   "DATACF", "FF"};
+
+// ch("name"), as Houdini users read a parameter of the same node, becomes the channel `name`
+// (the node's own channel, its previous value: a vector's components are NAMEx, NAMEy, NAMEz).
+// A name that is no channel of the node is refused with the names it has.
+std::string rewrite_ch(const std::string& text, const std::vector<std::string>& channels) {
+  std::string out;
+  size_t i = 0;
+  while (i < text.size()) {
+    const char c = text[i];
+    if (c == '"') {  // a string literal (strcmp's): copied as it is
+      size_t j = i + 1;
+      while (j < text.size() && text[j] != '"') j += text[j] == '\\' ? 2 : 1;
+      j = std::min(j + 1, text.size());
+      out.append(text, i, j - i);
+      i = j;
+      continue;
+    }
+    if (!is_name_char(c)) {
+      out += c;
+      ++i;
+      continue;
+    }
+    size_t j = i;
+    while (j < text.size() && is_name_char(text[j])) ++j;
+    const std::string name = text.substr(i, j - i);
+    size_t k = j;
+    while (k < text.size() && (text[k] == ' ' || text[k] == '\t')) ++k;
+    if (name != "ch" || k >= text.size() || text[k] != '(') {
+      out += name;
+      i = j;
+      continue;
+    }
+    // ch ( "name" )
+    size_t q = k + 1;
+    while (q < text.size() && (text[q] == ' ' || text[q] == '\t')) ++q;
+    const size_t open = q;
+    size_t close = open < text.size() && text[open] == '"' ? text.find('"', open + 1) : std::string::npos;
+    size_t end = close == std::string::npos ? close : close + 1;
+    while (end != std::string::npos && end < text.size() && (text[end] == ' ' || text[end] == '\t')) ++end;
+    if (close == std::string::npos || end >= text.size() || text[end] != ')')
+      throw ExprError("expression \"" + text + "\": ch takes one channel name in quotes, ch(\"name\")");
+    const std::string channel = text.substr(open + 1, close - open - 1);
+    if (std::find(channels.begin(), channels.end(), channel) == channels.end()) {
+      std::string have;
+      for (const std::string& n : channels) have += (have.empty() ? "" : ", ") + n;
+      throw ExprError("expression \"" + text + "\": ch(\"" + channel + "\"): the node has no channel '" +
+                      channel + "'" + (have.empty() ? std::string() : " (its channels: " + have + ")"));
+    }
+    out += "(" + channel + ")";
+    i = end + 1;
+  }
+  return out;
+}
 
 }  // namespace
 
@@ -241,7 +294,7 @@ struct Expression::Impl {
 
   Impl(const std::string& t, const std::vector<std::string>& names,
        const std::vector<std::pair<std::string, double*>>& bound)
-      : text(t), tmpl(t) {
+      : text(t), tmpl(rewrite_ch(t, names)) {
     try {
       parser.DefineNameChars(kNameChars);
       for (const auto& [n, value] : bound) parser.DefineVar(n, value);
@@ -293,8 +346,8 @@ struct Expression::Impl {
   }
 
   double eval(const ExprVars& v) {
-    locals = {v.ST,    v.SF,   v.T,     v.F,     v.TIMESTEP, v.SFPS,   v.OBJ,
-              v.OBJID, v.NOBJ, v.SNOBJ, v.OBJCT, v.OBJCF,    v.DATACT, v.DATACF};
+    locals = {v.ST,   v.SF,    v.T,     v.F,     v.TIMESTEP, v.SFPS,   v.OBJ, v.OBJID,
+              v.NOBJ, v.SNOBJ, v.OBJCT, v.OBJCF, v.DATACT,   v.DATACF, v.F};  // FF: F, fractional
     for (size_t k = 0; k < channel_names.size(); ++k) {
       double x = 0;
       if (v.channels) {

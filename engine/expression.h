@@ -20,7 +20,7 @@ struct ExprVars {
   double ST = 0;        // simulation time (s), 0 at the start
   double SF = 0;        // simulation frame = ST / TIMESTEP
   double T = 0;         // time (s); equals ST (no offset)
-  double F = 1;         // Houdini frame, 1-based = SF + 1
+  double F = 1;         // Houdini frame, 1-based = SF + 1 (fractional at substeps; $FF too)
   double TIMESTEP = 0;  // one frame's step (s) = 1 / fps
   double SFPS = 0;      // 1 / TIMESTEP
   double OBJ = 0;       // index of the object among those this node processes

@@ -39,7 +39,7 @@ TEST_CASE("every local variable reads with and without $", "[expression]") {
   const std::vector<std::pair<std::string, double>> expected = {
       {"ST", 1.5},   {"SF", 36},      {"T", 1.75},    {"F", 37},      {"TIMESTEP", 1.0 / 24},
       {"SFPS", 24},  {"OBJ", 2},      {"OBJID", 11},  {"NOBJ", 3},    {"SNOBJ", 5},
-      {"OBJCT", 0.25}, {"OBJCF", 6}, {"DATACT", 0.5}, {"DATACF", 12}};
+      {"OBJCT", 0.25}, {"OBJCF", 6}, {"DATACT", 0.5}, {"DATACF", 12}, {"FF", 37}};
   for (const auto& [name, value] : expected) {
     INFO(name);
     CHECK(eval1("$" + name, v) == value);
@@ -101,6 +101,26 @@ TEST_CASE("a channel reads its own previous value", "[expression]") {
   CHECK(eval1("activation", v, {"activation"}) == 3.0);
   // a channel name not given to the constructor is unknown
   CHECK_THROWS_AS(Expression("$other", {"activation"}), ExprError);
+}
+
+TEST_CASE("ch(\"name\") reads the node's own channel as Houdini users type it", "[expression]") {
+  // the same previous values as the bare channel names; a vector's components are NAMEx..z
+  Expression e("ch(\"activation\") * 0.5 + ch( \"forcey\" )", {"activation", "forcex", "forcey", "forcez"});
+  std::map<std::string, double> prev = {{"activation", 4.0}, {"forcey", -9.81}};
+  ExprVars v;
+  v.channels = &prev;
+  CHECK(e.eval(v) == Approx(2.0 - 9.81));
+  // inside a strcmp literal it is text, not a call
+  CHECK(eval1("strcmp(\"ch(x)\", \"ch(x)\")") == 0);
+  // a name the node does not have is refused with the names it has
+  try {
+    Expression bad("ch(\"drag\") + 1", {"activation", "rate"});
+    FAIL("no error");
+  } catch (const ExprError& err) {
+    CHECK_THAT(err.what(), Catch::Contains("ch(\"drag\"): the node has no channel 'drag' (its channels: activation, rate)"));
+  }
+  CHECK_THROWS_AS(Expression("ch(activation)", {"activation"}), ExprError);
+  CHECK_THROWS_AS(Expression("ch(\"activation\"", {"activation"}), ExprError);
 }
 
 TEST_CASE("strcmp compares the object's strings", "[expression]") {

@@ -1,7 +1,7 @@
 // attribute: sets or creates a point attribute from a per-point expression, as Houdini users
 // do with an attribute expression or a wrangle: `friction` by height, `pscale` at random by
 // id, a `targetstiffness` only inside. The expression sees the node's time variables ($ST, $F,
-// ...) and each point's own: $ID, $PT (its index), $NPT (the points acted on), $AGE (s),
+// ...) and each point's own: $ID, $PT (its index), $NPT (the points of its stream), $AGE (s),
 // $LIFE (age / the `life` attribute, 0 without it), $TX $TY $TZ (position), $VX $VY $VZ
 // (velocity), and any attribute as @name (a float or int attribute) or @name_x, @name_y,
 // @name_z (a vector's components). A vector attribute takes three expressions separated by

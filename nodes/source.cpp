@@ -374,9 +374,10 @@ class SourceNode : public Node {
   // The file's own point attributes (pscale, v, mass, targetP, ...) override the source's
   // parameters; those it lacks keep them (the store read_ply makes holds every standard
   // attribute, at its defaults: copying those made a file without pscale 0.05 m grains whatever
-  // the separation, and one without mass ignore `mass` and `density`). Without picks the new points are the file's, in order, and its edges become
-  // constraints between them; with picks (a rate emission) new point k is the file's point
-  // picks[k], and edges, which join points of one copy of the file, are not made.
+  // the separation, and one without mass ignore `mass` and `density`). Without picks the new
+  // points are the file's, in order, and its edges become constraints between them; with picks
+  // (a rate emission) new point k is the file's point picks[k], and edges, which join points of
+  // one copy of the file, are not made.
   void copy_file_attributes(CookContext& ctx, size_t first,
                             const std::vector<uint32_t>* picks = nullptr) {
     ParticleStore& s = ctx.pts;

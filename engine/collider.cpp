@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/mesh_shape.h"
+
 namespace grains {
 
 const char* shape_name(ShapeKind k) {
@@ -12,13 +14,14 @@ const char* shape_name(ShapeKind k) {
     case ShapeKind::Sphere: return "sphere";
     case ShapeKind::Torus: return "torus";
     case ShapeKind::Capsule: return "capsule";
+    case ShapeKind::Mesh: return "mesh";
   }
   return "?";
 }
 
 bool parse_shape(const std::string& s, ShapeKind& out) {
   for (ShapeKind k : {ShapeKind::Plane, ShapeKind::Box, ShapeKind::Sphere, ShapeKind::Torus,
-                      ShapeKind::Capsule})
+                      ShapeKind::Capsule, ShapeKind::Mesh})
     if (s == shape_name(k)) {
       out = k;
       return true;
@@ -53,7 +56,7 @@ Vec3 Pose::unrotate(const Vec3& d) const {
 Vec3 Pose::apply(const Vec3& local) const { return t + rotate(local) * s; }
 Vec3 Pose::inverse(const Vec3& world) const { return unrotate(world - t) / s; }
 
-float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal) {
+float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal, float within) {
   switch (sh.kind) {
     case ShapeKind::Plane:
       if (normal) *normal = {0, 1, 0};
@@ -98,13 +101,17 @@ float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal) {
       if (normal) *normal = l > 0 ? d / l : Vec3{1, 0, 0};
       return l - sh.radius;
     }
+    case ShapeKind::Mesh:
+      if (!sh.mesh) break;
+      return sh.mesh->distance(p, normal, within);
   }
+  if (normal) *normal = {0, 1, 0};
   return 1e30f;
 }
 
-float ColliderState::distance(const Vec3& p, Vec3* normal) const {
+float ColliderState::distance(const Vec3& p, Vec3* normal, float within) const {
   Vec3 nl;
-  float d = shape_distance(shape, pose.inverse(p), normal ? &nl : nullptr) * pose.s;
+  float d = shape_distance(shape, pose.inverse(p), normal ? &nl : nullptr, within / pose.s) * pose.s;
   if (normal) *normal = pose.rotate(nl);
   return d;
 }
@@ -128,19 +135,20 @@ float ColliderState::sweep(const Vec3& a, const Vec3& b, float radius) const {
   float r = radius / pose.s;
   Vec3 d = lb - la;
   float len = length(d);
-  float dist0 = shape_distance(shape, la, nullptr);
+  // a step needs the distance only up to what is left of the segment (past it the trace ends)
+  float dist0 = shape_distance(shape, la, nullptr, 2 * r + len);
   if (dist0 <= r) return 0.0f;
   if (len <= 0) return 2.0f;
   Vec3 dir = d / len;
   float s = 0;
   for (int it = 0; it < 256; ++it) {
-    float dist = shape_distance(shape, la + dir * s, nullptr) - r;
+    float dist = shape_distance(shape, la + dir * s, nullptr, 2 * r + (len - s)) - r;
     if (dist <= 1e-6f * (1.0f + len)) return s / len;
     s += dist;
     if (s > len) break;
   }
   // the end point may still be inside if tracing stopped short of it
-  return shape_distance(shape, lb, nullptr) <= r ? 1.0f : 2.0f;
+  return shape_distance(shape, lb, nullptr, 2 * r) <= r ? 1.0f : 2.0f;
 }
 
 }  // namespace grains

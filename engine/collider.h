@@ -2,25 +2,30 @@
 // a pose (rotation, translation, uniform scale) places it in the world and, with the pose a
 // substep earlier, gives the surface velocity that collider friction matches.
 #pragma once
+#include <limits>
+#include <memory>
 #include <string>
 
 #include "engine/vec3.h"
 
 namespace grains {
 
-enum class ShapeKind { Plane, Box, Sphere, Torus, Capsule };
+enum class ShapeKind { Plane, Box, Sphere, Torus, Capsule, Mesh };
 const char* shape_name(ShapeKind k);
 bool parse_shape(const std::string& s, ShapeKind& out);
 
 // Local shapes: plane y = 0 with solid below (normal +y); box centred, full extents `size`;
 // sphere of `radius`; torus in the xz plane, `radius` (ring) and `tube`; capsule along y with
-// `height` between the hemisphere centres and `radius`.
+// `height` between the hemisphere centres and `radius`; mesh: the triangles of `mesh`
+// (engine/mesh_shape.h: signed when closed, a two-sided shell otherwise).
+class MeshShape;
 struct Shape {
   ShapeKind kind = ShapeKind::Plane;
   Vec3 size{1, 1, 1};
   float radius = 0.5f;
   float tube = 0.1f;
   float height = 1.0f;
+  std::shared_ptr<const MeshShape> mesh;  // shape mesh only; shared, never changed once built
 };
 
 // Rigid placement with uniform scale: world = t + s * R * local.
@@ -35,8 +40,11 @@ struct Pose {
   Vec3 unrotate(const Vec3& world_dir) const;
 };
 
-// Signed distance in the shape's local frame (negative inside) and the outward normal.
-float shape_distance(const Shape& shape, const Vec3& p, Vec3* normal);
+// Signed distance in the shape's local frame (negative inside) and the outward normal. Exact
+// below `within`; a point at least `within` outside may get any value from `within` up to its
+// distance, and any normal (a mesh then skips the triangles beyond; analytic shapes are exact).
+float shape_distance(const Shape& shape, const Vec3& p, Vec3* normal,
+                     float within = std::numeric_limits<float>::infinity());
 
 // A collider at one substep: its shape, pose now and pose at the previous substep.
 struct ColliderState {
@@ -48,8 +56,10 @@ struct ColliderState {
   float bounce = 0.0f;    // restitution for the POP solver's response
   float friction = 0.5f;  // Coulomb friction for the POP solver's response
 
-  // World signed distance and outward normal at p (end pose).
-  float distance(const Vec3& p, Vec3* normal) const;
+  // World signed distance and outward normal at p (end pose); `within` as shape_distance's,
+  // in world units.
+  float distance(const Vec3& p, Vec3* normal,
+                 float within = std::numeric_limits<float>::infinity()) const;
   // Velocity of the collider's material at world point p (m/s).
   Vec3 velocity_at(const Vec3& p) const;
   // Where p, carried rigidly by the collider, was at the start of the substep.

@@ -6,10 +6,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
 #include "engine/geometry_io.h"
+#include "engine/mesh_shape.h"
 
 namespace grains {
 
@@ -32,6 +34,8 @@ bool parse_float(const std::string& text, float& out) {
 
 }  // namespace
 
+std::string collider_mesh_file(const std::string& name) { return "collider_" + name + ".obj"; }
+
 std::string collider_poses_header() {
   return "frame,time,collider,shape,size_x,size_y,size_z,radius,tube,height,"
          "r00,r01,r02,r10,r11,r12,r20,r21,r22,tx,ty,tz,scale\n";
@@ -42,7 +46,11 @@ std::string collider_poses_rows(int frame, double time,
   std::string rows;
   char buf[512];
   for (const ColliderState& c : colliders) {
-    const Shape& s = c.shape;
+    Shape s = c.shape;
+    if (s.kind == ShapeKind::Mesh) {  // its bounding box; the triangles are in their own file
+      s.size = s.mesh ? s.mesh->upper() - s.mesh->lower() : Vec3{0, 0, 0};
+      s.radius = s.tube = s.height = 0;
+    }
     const float* R = c.pose.R;
     std::snprintf(buf, sizeof buf,
                   "%d,%.6g,%s,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,"
@@ -61,6 +69,8 @@ std::map<int, std::vector<ColliderState>> read_collider_poses(const std::string&
   std::ifstream in(path);
   if (!in) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
   std::map<int, std::vector<ColliderState>> frames;
+  std::map<std::string, std::shared_ptr<const MeshShape>> meshes;  // by collider name
+  const std::string dir = std::filesystem::path(path).parent_path().string();
   std::string line;
   if (!std::getline(in, line) || line + "\n" != collider_poses_header())
     fail(path + ":1", "not a collider_poses.csv (expected the header " +
@@ -108,6 +118,16 @@ std::map<int, std::vector<ColliderState>> read_collider_poses(const std::string&
     c.pose.t = {v[15], v[16], v[17]};
     c.pose.s = v[18];
     c.prev_pose = c.pose;
+    if (c.shape.kind == ShapeKind::Mesh) {
+      std::shared_ptr<const MeshShape>& mesh = meshes[c.name];
+      if (!mesh) {
+        const std::string file = (dir.empty() ? "" : dir + "/") + collider_mesh_file(c.name);
+        std::string problem;
+        mesh = MeshShape::build(read_mesh(file), &problem);
+        if (!mesh) fail(file, problem);
+      }
+      c.shape.mesh = mesh;
+    }
     frames[static_cast<int>(std::stoll(digits))].push_back(std::move(c));
   }
   if (in.bad()) fail(path, std::string("cannot read (") + std::strerror(errno) + ")");

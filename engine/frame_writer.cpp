@@ -12,6 +12,7 @@
 #include "engine/collider_poses.h"
 #include "engine/geometry_io.h"
 #include "engine/graph.h"
+#include "engine/mesh_shape.h"
 
 namespace grains {
 
@@ -139,6 +140,11 @@ FrameWriter FrameWriter::continuing(std::string dir, std::vector<std::string> at
 void FrameWriter::write(const FrameOutput& out) {
   const FrameStats& s = *out.stats;
   // the poses first: a frame's PLY never exists without them, even when the run is killed
+  // and a mesh collider's triangles before its first row (collider_mesh_file)
+  if (out.colliders)
+    for (const ColliderState& c : *out.colliders)
+      if (c.shape.kind == ShapeKind::Mesh && c.shape.mesh && meshes_written_.insert(c.name).second)
+        write_obj(dir_ + "/" + collider_mesh_file(c.name), c.shape.mesh->mesh());
   if (out.colliders && !out.colliders->empty())
     append_text(dir_ + "/" + kColliderPosesFile,
                 collider_poses_rows(out.frame, s.time, *out.colliders), false);

@@ -1,6 +1,7 @@
 // The output folder of a run (DESIGN §6, docs/output-format.md): the FrameSink that `grains run`
 // and `grains cook` hand their frames to.
 #pragma once
+#include <set>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,7 @@ class FrameWriter : public FrameSink {
   bool all_ = false;
   FrameFormats formats_;
   std::vector<VtkDataSet> collection_;  // the .vtp frames written so far, for frames.pvd
+  std::set<std::string> meshes_written_;  // mesh colliders whose collider_NAME.obj is written
 };
 
 }  // namespace grains

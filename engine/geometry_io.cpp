@@ -1013,4 +1013,14 @@ Mesh read_mesh(const std::string& path) {
   fail(path, "unsupported mesh format '" + ext + "' (expected .ply or .obj)");
 }
 
+void write_obj(const std::string& path, const Mesh& mesh) {
+  write_file_atomically(path, [&](std::FILE* f) {
+    for (const Vec3& v : mesh.vertices)
+      if (std::fprintf(f, "v %.9g %.9g %.9g\n", v.x, v.y, v.z) < 0) return false;
+    for (const auto& t : mesh.triangles)
+      if (std::fprintf(f, "f %d %d %d\n", t[0] + 1, t[1] + 1, t[2] + 1) < 0) return false;
+    return true;
+  });
+}
+
 }  // namespace grains

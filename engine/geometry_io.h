@@ -67,5 +67,8 @@ struct Mesh {
 Mesh read_obj(const std::string& path);
 // Reads points from .ply (vertex positions) or .obj (vertices) by extension.
 Mesh read_mesh(const std::string& path);
+// Writes a mesh as a Wavefront OBJ (v lines with 9 significant digits, which read back to the
+// same floats; f lines of 1-based indices), atomically as write_file_atomically.
+void write_obj(const std::string& path, const Mesh& mesh);
 
 }  // namespace grains

@@ -113,8 +113,9 @@ struct NodeTypeInfo {
   bool reports_error = false;
   std::vector<ParamDecl> params;
   std::function<std::unique_ptr<Node>()> make;
-  // Colliders only: the shape and pose for evaluated parameters.
-  std::function<void(const ParamSet&, ColliderState&)> collider;
+  // Colliders only: the shape and pose for evaluated parameters (base_dir: the graph's folder,
+  // for files).
+  std::function<void(const ParamSet&, const std::string& base_dir, ColliderState&)> collider;
   // Extra load-time checks on authored parameters (file exists, ...); returns an error message
   // and the offending parameter name, or an empty message.
   std::function<std::pair<std::string, std::string>(const ParamSet&, const std::string& base_dir)>

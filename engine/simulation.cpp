@@ -114,11 +114,11 @@ void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
     ColliderState& c = obj.colliders[k];
     if (!obj.colliders_posed) {  // the pose at the start of the simulation
       checked(node, [&] { ps.evaluate(vars_for(obj, node, t_end - dt)); });
-      info->collider(ps, c);
+      info->collider(ps, graph_.base_dir, c);
     }
     Pose before = c.pose;
     checked(node, [&] { ps.evaluate(vars_for(obj, node, t_end)); });
-    info->collider(ps, c);
+    info->collider(ps, graph_.base_dir, c);
     c.name = graph_.nodes[node].name;
     c.prev_pose = before;
     c.dt = static_cast<float>(dt);

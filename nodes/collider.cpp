@@ -1,8 +1,11 @@
-// collider: a plane, box, sphere, torus or capsule with a transform that expressions or keyframes
-// may animate. Solvers list colliders by name; the evaluator poses them every substep, and the
+// collider: a plane, box, sphere, torus, capsule or triangle mesh with a transform that
+// expressions or keyframes may animate. Solvers list colliders by name; the evaluator poses them every substep, and the
 // pose a substep earlier gives the surface velocity.
+#include "engine/geometry_io.h"
+#include "engine/mesh_shape.h"
 #include "engine/node.h"
 #include "engine/param_rows.h"
+#include "nodes/common.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -10,8 +13,11 @@ namespace {
 
 // the node's parameters (engine/param_rows.h); shape's menu is in ShapeKind's order
 #define COLLIDER_PARAMS(ROW)                                                                    \
-  ROW(MENU, shape, 0, .menu_of({"plane", "box", "sphere", "torus", "capsule"}),                 \
-      "plane (y = 0, solid below, before the transform), box, sphere, torus (in xz), capsule (along y)") \
+  ROW(MENU, shape, 0, .menu_of({"plane", "box", "sphere", "torus", "capsule", "mesh"}),         \
+      "plane (y = 0, solid below, before the transform), box, sphere, torus (in xz), capsule "   \
+      "(along y), mesh (the triangles of `file`: a solid when closed, a two-sided shell when open)") \
+  ROW(STRING, file, "", ,                                                                       \
+      "mesh: OBJ or PLY triangle mesh in the collider's local frame, relative to the graph")      \
   ROW(VECTOR, size, (1, 1, 1), .unit("m"), "full extents of the box")                           \
   ROW(FLOAT, radius, 0.5, .positive().unit("m"), "sphere and capsule radius; torus ring radius") \
   ROW(FLOAT, tube, 0.1, .positive().unit("m"), "torus tube radius")                             \
@@ -34,9 +40,11 @@ void register_collider_node() {
   t.doc = "A collision shape with an animatable transform, referenced by solvers' `colliders`.";
   t.role = NodeRole::Collider;
   t.params = ColliderParams::decls();
-  t.collider = [](const ParamSet& params, ColliderState& c) {
+  t.collider = [](const ParamSet& params, const std::string& base_dir, ColliderState& c) {
     const ColliderParams p = ColliderParams::read(params);
     c.shape.kind = static_cast<ShapeKind>(p.shape.index);
+    c.shape.mesh = c.shape.kind == ShapeKind::Mesh ? cached_mesh_shape(resolve_path(base_dir, p.file))
+                                                   : nullptr;
     c.shape.size = p.size;
     c.shape.radius = static_cast<float>(p.radius);
     c.shape.tube = static_cast<float>(p.tube);
@@ -71,8 +79,16 @@ void register_collider_node() {
     }
     c.pose = pose;
   };
-  t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
+  t.check = [](const ParamSet& p, const std::string& base) -> std::pair<std::string, std::string> {
     const ColliderParams q = ColliderParams::read(p);
+    if (q.shape == static_cast<int>(ShapeKind::Mesh)) {
+      if (q.file.empty()) return {"shape \"mesh\" needs a `file`", "file"};
+      try {
+        (void)cached_mesh_shape(resolve_path(base, q.file));
+      } catch (const GeometryError& e) {
+        return {e.what(), "file"};
+      }
+    }
     if (q.shape == static_cast<int>(ShapeKind::Plane) && length(q.normal) == 0 &&
         !p.is_animated("normal"))
       return {"the plane normal must not be zero", "normal"};

@@ -1,6 +1,7 @@
 // Small helpers shared by node implementations.
 #pragma once
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "engine/vec3.h"
@@ -20,6 +21,13 @@ inline float rand01(uint64_t seed, uint64_t counter) {
 
 // Resolves a path relative to the graph's folder.
 std::string resolve_path(const std::string& base_dir, const std::string& path);
+
+// The shape of mesh file `path` (OBJ or PLY triangles, engine/mesh_shape.h), read and built once
+// per process for each version of the file (its size and modification time): colliders are
+// posed every substep and a hierarchy costs far more than a pose. Throws GeometryError
+// ("PATH: what is wrong") for a missing or unusable file.
+class MeshShape;
+std::shared_ptr<const MeshShape> cached_mesh_shape(const std::string& path);
 
 // Region test shared by group and kill: a box (center, full size), a sphere (center, radius) or
 // a cylinder (vertical: axis along y through center, radius, height size.y; kill only). In the

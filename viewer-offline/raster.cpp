@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 
+#include "engine/mesh_shape.h"
 #include "viewer-offline/render.h"
 
 namespace grains::viewer {
@@ -101,6 +102,8 @@ float local_bound(const Shape& s) {
       return s.radius + s.tube;
     case ShapeKind::Capsule:
       return 0.5f * s.height + s.radius;
+    case ShapeKind::Mesh:
+      return s.mesh ? s.mesh->bound_radius() : 0.0f;
     case ShapeKind::Plane:
       break;
   }

@@ -130,7 +130,8 @@ void final_collision(const ColliderState* colliders, const uint8_t* still, size_
   for (size_t c = 0; c < collider_count; ++c) {
     const ColliderState& col = colliders[c];
     Vec3 n;
-    float e = col.distance(b, &n);
+    // exact up to past both tests below (a mesh skips its triangles beyond)
+    float e = col.distance(b, &n, 1.505f * r + length(b - a));
     // An end point within r is pushed out, unless the grain moved along that normal and its
     // path crossed the collider: then it is on the far side of a thin one (the iterations
     // pushed it out the back) and is handled as tunnelled below. Moving along the normal, a
@@ -428,7 +429,7 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
     int count = 0;
     for (size_t c = 0; c < collider_count; ++c) {
       Vec3 nc;
-      float d = colliders[c].distance(x, &nc);
+      float d = colliders[c].distance(x, &nc, range);
       if (!(d < range)) continue;
       // insertion into the nearest-first list
       int at = count < GR_MAX_PLANES ? count : GR_MAX_PLANES;

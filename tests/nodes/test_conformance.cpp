@@ -267,6 +267,7 @@ std::map<std::string, Special> specials() {
       {"collider.height", {{{"shape", "capsule"}, {"rotate", {90, 0, 0}}, {"radius", 0.1}}, 0.1}},
       {"collider.normal", {{{"shape", "plane"}}, json::array({0.3, 1, 0})}},
       {"collider.scale", {json::object(), 1.5}},
+      {"collider.file", {{{"shape", "mesh"}, {"file", "data/target_cube.obj"}}, "data/target_tetra.obj"}},
       // solver
       {"solver.colliders", {json::object(), json::array()}},
       // the heap asks for more than a few substeps: a low cap binds

@@ -12,7 +12,7 @@ TEST_CASE("the collider's shape menu is in ShapeKind's order", "[nodes][collider
   REQUIRE(collider);
   const ParamDecl* shape = collider->find_param("shape");
   REQUIRE(shape);
-  REQUIRE(shape->menu.size() == 5);
+  REQUIRE(shape->menu.size() == 6);
   for (size_t k = 0; k < shape->menu.size(); ++k)
     CHECK(shape->menu[k] == shape_name(static_cast<ShapeKind>(k)));
 }

@@ -1,0 +1,65 @@
+// A triangle mesh as a collider shape: the exact distance to its surface through a
+// bounding-volume hierarchy of its triangles.
+//
+// Closed meshes (every edge shared by exactly two triangles that run along it in opposite
+// directions, after welding vertices at equal positions) are solids: the distance is signed,
+// negative inside, the side told by the angle-weighted pseudonormal of the nearest feature
+// (face, edge or vertex; Baerentzen & Aanaes 2005), which is exact wherever the nearest point is
+// unique. A closed mesh wound inward is turned outward (its signed volume decides). Any other
+// mesh is a shell (a sheet, a bowl's wall): the distance is unsigned, so a grain is kept at its
+// radius from either side, and the final collision pass's sweep stops it crossing.
+//
+// The query walks the hierarchy nearest box first and skips every box farther than the best
+// triangle found; triangle tests are in double precision so that the nearest feature, and with
+// it the sign, does not flip between the two triangles of an edge.
+#pragma once
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/geometry_io.h"
+#include "engine/vec3.h"
+
+namespace grains {
+
+class MeshShape {
+ public:
+  // Builds the shape of `mesh` (local coordinates). Returns null and sets *problem when the mesh
+  // has no triangle of non-zero area or a vertex index out of range.
+  static std::shared_ptr<const MeshShape> build(const Mesh& mesh, std::string* problem);
+
+  // Distance from local point p to the surface (signed for a closed mesh, negative inside;
+  // unsigned for a shell) and the unit normal along which it grows (outward for a closed mesh).
+  // Exact when it is below `within`; a point at least `within` from the surface (outside) gets
+  // some value between `within` and its distance, and an arbitrary normal: the walk then skips
+  // every box farther than `within`, which is what makes a query from inside a bowl cheap.
+  float distance(const Vec3& p, Vec3* normal,
+                 float within = std::numeric_limits<float>::infinity()) const;
+
+  bool closed() const { return closed_; }
+  size_t triangle_count() const { return tri_.size(); }
+  Vec3 lower() const { return lo_; }  // bounding box of the vertices
+  Vec3 upper() const { return hi_; }
+  float bound_radius() const { return bound_radius_; }  // largest |vertex|
+  // The welded mesh the shape measures (triangles of zero area dropped; inward closed meshes
+  // turned outward), e.g. to write it beside a run's output.
+  const Mesh& mesh() const { return mesh_; }
+
+ private:
+  struct Node {
+    float lo[3], hi[3];
+    int first, count;  // leaf: triangles [first, first + count); inner: count 0, children first, first + 1
+  };
+  Mesh mesh_;
+  std::vector<std::array<int, 3>> tri_;  // in hierarchy order
+  std::vector<Vec3> face_n_;             // unit normal per triangle (hierarchy order)
+  std::vector<Vec3> edge_n_;             // 3 per triangle: edge (v0 v1), (v1 v2), (v2 v0)
+  std::vector<Vec3> vertex_n_;           // angle-weighted pseudonormal per vertex
+  std::vector<Node> nodes_;
+  Vec3 lo_, hi_;
+  float bound_radius_ = 0;
+  bool closed_ = false;
+};
+
+}  // namespace grains

@@ -1,6 +1,7 @@
 // source: a stream generator. Fills a box, sphere or grid at `separation` (grid or hexagonal
-// packing, optional jitter), reads points from a PLY/OBJ file, or turns an image mask into a flat
-// sheet; emits once at a frame or at a rate over a frame range, with an initial velocity. pscale
+// packing, optional jitter), reads points from a PLY/OBJ file, turns an image mask into a flat
+// sheet, scatters grains over a triangle mesh's surface or fills its inside; emits once at a
+// frame or at a rate over a frame range, with an initial velocity. pscale
 // defaults to separation/2 and mass comes from density when one is given. With connect_radius,
 // each emission's grains are joined by explicit constraints (2-point primitives) to the grains
 // of the same emission within connect_radius x separation.
@@ -18,6 +19,7 @@
 #include <stb_image.h>
 
 #include "engine/geometry_io.h"
+#include "engine/mesh_shape.h"
 #include "engine/node.h"
 #include "engine/state_stream.h"
 #include "nodes/common.h"
@@ -35,21 +37,25 @@ std::string count_text(double n) {
 }
 
 // the menus' choices, in their order
-enum Shape { kBox, kSphere, kGrid, kFile, kImage };
+enum Shape { kBox, kSphere, kGrid, kFile, kImage, kSurface, kVolume };
 enum Emission { kOnce, kRate };
 enum Packing { kCubic, kHexagonal };
 
 // the node's parameters (engine/param_rows.h)
 #define SOURCE_PARAMS(ROW)                                                                          \
   ROW(FLOAT, activation, 1, , "the node emits only while this is greater than 0")                  \
-  ROW(MENU, shape, kBox, .menu_of({"box", "sphere", "grid", "file", "image"}),                      \
-      "what to fill: a box, a sphere, a one-layer grid in the xz plane, the points of `file`, or a " \
-      "sheet in the xz plane (size x, z) from the PNG mask `file`")                                 \
+  ROW(MENU, shape, kBox,                                                                            \
+      .menu_of({"box", "sphere", "grid", "file", "image", "surface", "volume"}),                    \
+      "what to fill: a box, a sphere, a one-layer grid in the xz plane, the points of `file`, a "  \
+      "sheet in the xz plane (size x, z) from the PNG mask `file`, the surface of the mesh `file` " \
+      "(grains on it, no two closer than the separation), or the inside of the closed mesh `file` " \
+      "(the packing, grains wholly inside)")                                                         \
   ROW(VECTOR, center, (0, 0, 0), .unit("m"), "centre of the shape; offset added to file points")   \
   ROW(VECTOR, size, (1, 1, 1), .unit("m"), "full extents of the box or grid")                       \
   ROW(FLOAT, radius, 0.5, .positive().unit("m"), "radius of the sphere")                            \
   ROW(STRING, file, "", ,                                                                           \
-      "PLY or OBJ file of points (shape \"file\") or PNG mask (shape \"image\"), relative to the graph") \
+      "PLY or OBJ file of points (shape \"file\"), PLY or OBJ triangle mesh (\"surface\", "          \
+      "\"volume\") or PNG mask (\"image\"), relative to the graph")                                     \
   ROW(FLOAT, threshold, 0.5, .range(0, 1),                                                          \
       "image: a grain where the pixel block's alpha (or luminance) exceeds this")                   \
   ROW(FLOAT, connect_radius, 0, .at_least(0),                                                       \
@@ -59,8 +65,9 @@ enum Packing { kCubic, kHexagonal };
   ROW(MENU, packing, kCubic, .menu_of({"grid", "hexagonal"}), "cubic grid or hexagonal close packing") \
   ROW(FLOAT, jitter, 0, .range(0, 1), "random offset of each grain, as a fraction of the separation") \
   ROW(MENU, emission, kOnce, .menu_of({"once", "rate"}),                                            \
-      "emit the whole fill once at `birth_frame`, or random points at `rate`: in the box, sphere " \
-      "or grid, or picked among the file's points or the mask's sheet")                            \
+      "emit the whole fill once at `birth_frame`, or random points at `rate`: in the box, sphere, " \
+      "grid, on the mesh's surface or inside it, or picked among the file's points or the mask's " \
+      "sheet")                                                                                      \
   ROW(INT, birth_frame, 1, .at_least(1), "frame of the one-time emission")                          \
   ROW(FLOAT, rate, 100, .at_least(0).unit("1/s"), "grains per second while emitting at a rate")     \
   ROW(INT, start_frame, 1, .at_least(1), "first frame of rate emission")                            \
@@ -152,16 +159,27 @@ class SourceNode : public Node {
     float s = static_cast<float>(p.separation);
     Vec3 size = p.size;
     if (shape == kImage) return image_sheet(ctx, c, size, s);
+    if (shape == kSurface) return surface_scatter(ctx, *mesh(ctx), c, s);
     float radius = static_cast<float>(p.radius);
     bool hex = p.packing == kHexagonal;
     if (shape == kSphere) size = Vec3{2 * radius, 2 * radius, 2 * radius};
     if (shape == kGrid) size.y = 0;  // a single layer in the xz plane
+    // a mesh's inside: the packing over its bounding box (one more point each way, to cover
+    // it), keeping the grains wholly inside
+    std::shared_ptr<const MeshShape> solid = shape == kVolume ? mesh(ctx) : nullptr;
+    const bool cover = shape == kGrid || shape == kVolume;
+    if (solid) {
+      size = solid->upper() - solid->lower();
+      c = p.center + (solid->upper() + solid->lower()) * 0.5f;
+    }
     // hexagonal close packing: rows offset by s/2, layers by s*sqrt(3)/2 and sqrt(2/3)*s
     float dx = s, dz = hex ? s * std::sqrt(3.0f) / 2 : s, dy = hex ? s * std::sqrt(2.0f / 3.0f) : s;
     // counts along each axis, checked against the point budget before any is made
-    const double cx = std::max(1.0, double(std::floor(size.x / dx + 1e-4f)) + (shape == kGrid ? 1 : 0));
-    const double cy = shape == kGrid ? 1.0 : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)));
-    const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (shape == kGrid ? 1 : 0));
+    const double cx = std::max(1.0, double(std::floor(size.x / dx + 1e-4f)) + (cover ? 1 : 0));
+    const double cy = shape == kGrid ? 1.0
+                                     : std::max(1.0, double(std::floor(size.y / dy + 1e-4f)) +
+                                                         (shape == kVolume ? 1 : 0));
+    const double cz = std::max(1.0, double(std::floor(size.z / dz + 1e-4f)) + (cover ? 1 : 0));
     check_point_budget(ctx.node_name, cx * cy * cz, ctx.pts.size(), ctx.max_points,
                        "a " + p.shape.text + " of " + count_text(cx) + " x " + count_text(cy) + " x " +
                            count_text(cz) + " grains");
@@ -183,9 +201,96 @@ class SourceNode : public Node {
           }
           counter += 3;
           if (shape == kSphere && length(q - c) > radius) continue;
+          if (solid && solid->distance(q - p.center, nullptr, grain_radius()) > -grain_radius())
+            continue;
           out.push_back(q);
         }
     return out;
+  }
+
+  float grain_radius() const {
+    return p_.pscale > 0 ? static_cast<float>(p_.pscale) : static_cast<float>(p_.separation) * 0.5f;
+  }
+
+  std::shared_ptr<const MeshShape> mesh(CookContext& ctx) const {
+    return cached_mesh_shape(resolve_path(ctx.base_dir, p_.file));
+  }
+
+  // The running sum of the mesh's triangle areas (the last is the whole area), for picking a
+  // point uniformly over the surface.
+  static std::vector<double> cumulative_areas(const Mesh& m) {
+    std::vector<double> sum;
+    double total = 0;
+    for (const auto& t : m.triangles) {
+      total += 0.5 * double(length(cross(m.vertices[t[1]] - m.vertices[t[0]],
+                                         m.vertices[t[2]] - m.vertices[t[0]])));
+      sum.push_back(total);
+    }
+    return sum;
+  }
+
+  // A point uniform over the surface from three uniform numbers: a triangle by area, then a
+  // point uniform in it (the square-root warp of the barycentric coordinates).
+  static Vec3 surface_point(const Mesh& m, const std::vector<double>& areas, float u0, float u1,
+                            float u2) {
+    const double at = u0 * areas.back();
+    size_t t = std::upper_bound(areas.begin(), areas.end(), at) - areas.begin();
+    t = std::min(t, areas.size() - 1);
+    const auto& tri = m.triangles[t];
+    const float a = std::sqrt(u1);
+    return m.vertices[tri[0]] * (1 - a) + m.vertices[tri[1]] * (a * (1 - u2)) +
+           m.vertices[tri[2]] * (a * u2);
+  }
+
+  // Grains on the mesh's surface (offset by c), no two closer than the separation s: random
+  // points uniform over the surface, each kept when no kept point lies within s (a hash grid of
+  // cell s), until 1024 in a row are refused. That leaves little room for another: on a sphere
+  // it keeps 0.61 grains per s^2, 88% of the 0.70 where random sequential adding jams, and no
+  // such set holds more than hexagonal packing's 1.15 (the budget is checked against that).
+  std::vector<Vec3> surface_scatter(CookContext& ctx, const MeshShape& shape, const Vec3& c,
+                                    float s) {
+    const Mesh& m = shape.mesh();
+    const std::vector<double> areas = cumulative_areas(m);
+    const double most = 2.0 * areas.back() / (std::sqrt(3.0) * double(s) * double(s)) + 1;
+    check_point_budget(ctx.node_name, most, ctx.pts.size(), ctx.max_points,
+                       "up to " + count_text(std::floor(most)) + " grains on the surface");
+    auto cell = [&](float x) {
+      return static_cast<int64_t>(std::clamp(std::floor(double(x) / s), -1e15, 1e15));
+    };
+    auto key = [](int64_t x, int64_t y, int64_t z) {
+      return static_cast<int64_t>((uint64_t(x) * 73856093u) ^ (uint64_t(y) * 19349663u) ^
+                                  (uint64_t(z) * 83492791u));
+    };
+    std::unordered_map<int64_t, std::vector<uint32_t>> grid;
+    std::vector<Vec3> kept;
+    uint64_t counter = 0;
+    for (int refused = 0; refused < 1024;) {
+      const Vec3 q = surface_point(m, areas, rand01(ctx.seed, counter), rand01(ctx.seed, counter + 1),
+                                   rand01(ctx.seed, counter + 2));
+      counter += 3;
+      const int64_t x = cell(q.x), y = cell(q.y), z = cell(q.z);
+      bool free = true;
+      for (int64_t dz = -1; dz <= 1 && free; ++dz)
+        for (int64_t dy = -1; dy <= 1 && free; ++dy)
+          for (int64_t dx = -1; dx <= 1 && free; ++dx) {
+            auto it = grid.find(key(x + dx, y + dy, z + dz));
+            if (it == grid.end()) continue;
+            for (uint32_t j : it->second)
+              if (length(kept[j] - q) < s) {
+                free = false;
+                break;
+              }
+          }
+      if (!free) {
+        ++refused;
+        continue;
+      }
+      refused = 0;
+      grid[key(x, y, z)].push_back(static_cast<uint32_t>(kept.size()));
+      kept.push_back(q);
+    }
+    for (Vec3& q : kept) q += c;
+    return kept;
   }
 
   // An image mask as a flat sheet in the xz plane, size.x by size.z centred at c: one grain per
@@ -297,6 +402,29 @@ class SourceNode : public Node {
       float z = 2 * u.y - 1, phi = 2 * static_cast<float>(M_PI) * u.z;
       float q = std::sqrt(std::max(0.0f, 1 - z * z));
       return c + Vec3{q * std::cos(phi), z, q * std::sin(phi)} * r;
+    }
+    if (p.shape == kSurface) {
+      const std::shared_ptr<const MeshShape> m = mesh(ctx);
+      if (m != rate_mesh_) {
+        rate_mesh_ = m;
+        rate_areas_ = cumulative_areas(m->mesh());
+      }
+      return c + surface_point(m->mesh(), rate_areas_, u.x, u.y, u.z);
+    }
+    if (p.shape == kVolume) {  // uniform in the bounding box, kept wholly inside
+      const std::shared_ptr<const MeshShape> m = mesh(ctx);
+      const Vec3 lo = m->lower(), ext = m->upper() - m->lower();
+      const float r = grain_radius();
+      for (int tries = 0; tries < 100000; ++tries) {
+        const Vec3 q = lo + Vec3{u.x * ext.x, u.y * ext.y, u.z * ext.z};
+        if (m->distance(q, nullptr, r) <= -r) return c + q;
+        k = 3 * counter_++;
+        u = {rand01(ctx.seed, k), rand01(ctx.seed, k + 1), rand01(ctx.seed, k + 2)};
+      }
+      throw GeometryError(resolve_path(ctx.base_dir, p.file) + ": no grain of radius " +
+                          std::to_string(r) +
+                          " m fits inside the mesh (100000 random points of its bounding box "
+                          "tried)");
     }
     Vec3 size = p.size;
     if (p.shape == kGrid) size.y = 0;
@@ -416,6 +544,8 @@ class SourceNode : public Node {
   std::vector<std::string> file_attributes_;  // the point attributes file_'s file provides
   std::string shape_key_;         // what shape_pts_ were made from
   std::vector<Vec3> shape_pts_;   // a rate emission's points to pick from (shape_points)
+  std::shared_ptr<const MeshShape> rate_mesh_;  // the mesh rate_areas_ were summed for
+  std::vector<double> rate_areas_;  // its cumulative triangle areas (surface rate emission)
   bool emitted_ = false;
   double carry_ = 0;
   uint64_t counter_ = 0;
@@ -436,6 +566,20 @@ void register_source_node() {
       if (p.file.empty()) return {"shape \"" + p.shape.text + "\" needs a `file`", "file"};
       std::string path = resolve_path(base, p.file);
       if (!std::filesystem::exists(path)) return {"file not found: " + path, "file"};
+    }
+    if (p.shape == kSurface || p.shape == kVolume) {
+      if (p.file.empty()) return {"shape \"" + p.shape.text + "\" needs a mesh `file`", "file"};
+      std::shared_ptr<const MeshShape> m;
+      try {
+        m = cached_mesh_shape(resolve_path(base, p.file));
+      } catch (const GeometryError& e) {
+        return {e.what(), "file"};
+      }
+      if (p.shape == kVolume && !m->closed())
+        return {resolve_path(base, p.file) +
+                    ": a volume fill needs a closed mesh (every edge shared by two triangles "
+                    "running along it in opposite directions); this one is open",
+                "file"};
     }
     if (!p.group.empty())
       if (std::string bad = group_name_problem(p.group); !bad.empty()) return {bad, "group"};

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""Writes the example graphs' data: bacon.png (a wavy strip mask, BaconDrop) and rope.ply
-(a 40-link chain whose first point has mass 0, an immovable anchor)."""
+"""Writes the example graphs' data: bacon.png (a wavy strip mask, BaconDrop), rope.ply
+(a 40-link chain whose first point has mass 0, an immovable anchor) and bowl.obj (a
+hemispherical bowl, an open shell, for mesh_bowl)."""
 import math
 import os
 import struct
@@ -40,3 +41,52 @@ with open(os.path.join(here, "rope.ply"), "w") as f:
         f.write("%g 1 0 %g %g\n" % (k * link, 0.011, 0.0 if k == 0 else 0.01))
     for k in range(n - 1):
         f.write("%d %d %g\n" % (k, k + 1, link))
+
+# bowl.obj: the lower half of a sphere of radius 0.3 m whose lowest point is the origin, rim at
+# y = 0.3; 32 segments around, 12 rings from the bottom pole to the rim; open (no lid)
+R, seg, rings = 0.3, 32, 12
+with open(os.path.join(here, "bowl.obj"), "w") as f:
+    f.write("# a hemispherical bowl: radius 0.3 m, bottom at the origin, rim at y = 0.3 (make_data.py)\n")
+    f.write("v 0 0 0\n")
+    for i in range(1, rings + 1):
+        t = 0.5 * math.pi * i / rings
+        for j in range(seg):
+            p = 2 * math.pi * j / seg
+            f.write("v %.6f %.6f %.6f\n" % (R * math.sin(t) * math.cos(p), R - R * math.cos(t),
+                                           R * math.sin(t) * math.sin(p)))
+    ring = lambda i, j: 2 + (i - 1) * seg + j % seg  # 1-based index of ring i's vertex j
+    for j in range(seg):  # the fan at the bottom, facing up into the bowl
+        f.write("f 1 %d %d\n" % (ring(1, j + 1), ring(1, j)))
+    for i in range(1, rings):
+        for j in range(seg):
+            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
+            f.write("f %d %d %d\nf %d %d %d\n" % (a, b, c, a, c, d))
+
+# rock.obj: a lumpy closed stone about 0.16 m across: an icosahedron subdivided once, each vertex
+# pushed out or in by a fixed pseudo-random factor (0.75 to 1.25 of 0.08 m); wound outward
+t = (1 + math.sqrt(5)) / 2
+ico_v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
+         (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+ico_f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+         (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9),
+         (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+unit = lambda p: tuple(c / math.sqrt(sum(q * q for q in p)) for c in p)
+verts = [unit(p) for p in ico_v]
+mid = {}
+def middle(a, b):
+    key = (min(a, b), max(a, b))
+    if key not in mid:
+        verts.append(unit(tuple((verts[a][k] + verts[b][k]) / 2 for k in range(3))))
+        mid[key] = len(verts) - 1
+    return mid[key]
+faces = []
+for a, b, c in ico_f:
+    ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
+    faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+with open(os.path.join(here, "rock.obj"), "w") as f:
+    f.write("# a lumpy stone about 0.16 m across (make_data.py)\n")
+    for k, p in enumerate(verts):
+        s = 0.08 * (1 + 0.25 * math.sin(12.9898 * k + 78.233 * (k % 7)))
+        f.write("v %.6f %.6f %.6f\n" % tuple(s * c for c in p))
+    for a, b, c in faces:
+        f.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))

@@ -95,9 +95,17 @@ std::string format_error(const mu::Parser::exception_type& e, const std::string&
 
 // ---- strcmp resolution: the only string operation; resolved textually before muparser ----
 
-enum class StrArg { Literal, ObjName, DopNet };
+// The string variables strcmp compares, in the order their values are kept.
+constexpr std::array<const char*, 9> kStringNames = {
+    "OBJNAME",     "DOPNET",    "ALLOBJIDS",   "ALLOBJNAMES",   "RELNAME",
+    "RELOBJIDS",   "RELOBJNAMES", "RELAFFOBJIDS", "RELAFFOBJNAMES"};
+using StringValues = std::array<std::string, kStringNames.size()>;
+StringValues string_values(const ExprVars& v) {
+  return {v.OBJNAME, v.DOPNET, v.ALLOBJIDS, v.ALLOBJNAMES, "", "", "", "", ""};  // REL*: ExprVars
+}
+
 struct StrOperand {
-  StrArg kind = StrArg::Literal;
+  int var = -1;  // index into kStringNames, or -1 for the literal
   std::string literal;
 };
 struct StrcmpCall {
@@ -109,8 +117,7 @@ struct StrcmpCall {
 struct StringTemplate {
   std::string text;
   std::vector<StrcmpCall> calls;
-  bool uses_objname = false;
-  bool uses_dopnet = false;
+  std::array<bool, kStringNames.size()> uses{};  // which string variables the calls read
 
   static void skip_ws(const std::string& s, size_t& i) {
     while (i < s.size() && (s[i] == ' ' || s[i] == '\t' || s[i] == '\n' || s[i] == '\r')) ++i;
@@ -149,16 +156,20 @@ struct StringTemplate {
       if (!read_literal(s, i, op.literal)) fail(text, "unterminated string literal");
       return op;
     }
-    const std::string n = read_name(s, i);
-    if (n == "$OBJNAME" || n == "OBJNAME") {
-      op.kind = StrArg::ObjName;
-      uses_objname = true;
-    } else if (n == "$DOPNET" || n == "DOPNET") {
-      op.kind = StrArg::DopNet;
-      uses_dopnet = true;
-    } else {
-      fail(text, "strcmp takes string literals (\"...\"), $OBJNAME or $DOPNET");
+    std::string n = read_name(s, i);
+    if (!n.empty() && n[0] == '$') n.erase(0, 1);
+    for (size_t k = 0; k < kStringNames.size(); ++k)
+      if (n == kStringNames[k]) op.var = static_cast<int>(k);
+    if (op.var < 0) {
+      std::string names;
+      for (const char* name : kStringNames) {
+        if (!names.empty()) names += ", ";
+        names += '$';
+        names += name;
+      }
+      fail(text, "strcmp takes string literals (\"...\") or the string variables " + names);
     }
+    uses[op.var] = true;
     return op;
   }
 
@@ -199,14 +210,10 @@ struct StringTemplate {
     }
   }
 
-  std::string resolve(const std::string& objname, const std::string& dopnet) const {
+  std::string resolve(const StringValues& values) const {
     if (calls.empty()) return text;
     auto value = [&](const StrOperand& op) -> const std::string& {
-      switch (op.kind) {
-        case StrArg::ObjName: return objname;
-        case StrArg::DopNet: return dopnet;
-        default: return op.literal;
-      }
+      return op.var < 0 ? op.literal : values[op.var];
     };
     std::string out;
     out.reserve(text.size());
@@ -231,16 +238,16 @@ constexpr std::array<const char*, kNumLocals> kLocalNames = {
 // (the node's own channel, its previous value: a vector's components are NAMEx, NAMEy, NAMEz).
 // A name that is no channel of the node is refused with the names it has.
 std::string rewrite_ch(const std::string& text, const std::vector<std::string>& channels) {
+  using T = StringTemplate;
   std::string out;
   size_t i = 0;
   while (i < text.size()) {
     const char c = text[i];
     if (c == '"') {  // a string literal (strcmp's): copied as it is
-      size_t j = i + 1;
-      while (j < text.size() && text[j] != '"') j += text[j] == '\\' ? 2 : 1;
-      j = std::min(j + 1, text.size());
-      out.append(text, i, j - i);
-      i = j;
+      const size_t start = i;
+      std::string ignored;
+      T::read_literal(text, i, ignored);
+      out.append(text, start, i - start);
       continue;
     }
     if (!is_name_char(c)) {
@@ -248,26 +255,21 @@ std::string rewrite_ch(const std::string& text, const std::vector<std::string>& 
       ++i;
       continue;
     }
-    size_t j = i;
-    while (j < text.size() && is_name_char(text[j])) ++j;
-    const std::string name = text.substr(i, j - i);
-    size_t k = j;
-    while (k < text.size() && (text[k] == ' ' || text[k] == '\t')) ++k;
+    const std::string name = T::read_name(text, i);
+    size_t k = i;
+    T::skip_ws(text, k);
     if (name != "ch" || k >= text.size() || text[k] != '(') {
       out += name;
-      i = j;
       continue;
     }
     // ch ( "name" )
     size_t q = k + 1;
-    while (q < text.size() && (text[q] == ' ' || text[q] == '\t')) ++q;
-    const size_t open = q;
-    size_t close = open < text.size() && text[open] == '"' ? text.find('"', open + 1) : std::string::npos;
-    size_t end = close == std::string::npos ? close : close + 1;
-    while (end != std::string::npos && end < text.size() && (text[end] == ' ' || text[end] == '\t')) ++end;
-    if (close == std::string::npos || end >= text.size() || text[end] != ')')
+    T::skip_ws(text, q);
+    std::string channel;
+    bool ok = q < text.size() && text[q] == '"' && T::read_literal(text, q, channel);
+    if (ok) T::skip_ws(text, q);
+    if (!ok || q >= text.size() || text[q] != ')')
       throw ExprError("expression \"" + text + "\": ch takes one channel name in quotes, ch(\"name\")");
-    const std::string channel = text.substr(open + 1, close - open - 1);
     if (std::find(channels.begin(), channels.end(), channel) == channels.end()) {
       std::string have;
       for (const std::string& n : channels) have += (have.empty() ? "" : ", ") + n;
@@ -275,7 +277,7 @@ std::string rewrite_ch(const std::string& text, const std::vector<std::string>& 
                       channel + "'" + (have.empty() ? std::string() : " (its channels: " + have + ")"));
     }
     out += "(" + channel + ")";
-    i = end + 1;
+    i = q + 1;
   }
   return out;
 }
@@ -289,8 +291,7 @@ struct Expression::Impl {
   std::array<double, kNumLocals> locals{};
   std::vector<std::string> channel_names;  // bound channels, same order as channel_values
   std::unique_ptr<double[]> channel_values;
-  // strings the parser was last compiled with
-  std::string last_objname, last_dopnet;
+  StringValues last;  // the string variables the parser was last compiled with
 
   Impl(const std::string& t, const std::vector<std::string>& names,
        const std::vector<std::pair<std::string, double*>>& bound)
@@ -338,7 +339,7 @@ struct Expression::Impl {
       parser.DefineFun("mod", fn_mod);
       parser.DefineFun("rand", fn_rand);
       // validate now, with empty strings, so parse errors surface at load time
-      parser.SetExpr(tmpl.resolve(last_objname, last_dopnet));
+      parser.SetExpr(tmpl.resolve(last));
       parser.Eval();
     } catch (const mu::Parser::exception_type& e) {
       throw ExprError(format_error(e, text));
@@ -357,14 +358,16 @@ struct Expression::Impl {
       channel_values[k] = x;
     }
     try {
-      const bool objname_changed = tmpl.uses_objname && v.OBJNAME != last_objname;
-      const bool dopnet_changed = tmpl.uses_dopnet && v.DOPNET != last_dopnet;
-      if (objname_changed || dopnet_changed) {
-        const std::string before = tmpl.resolve(last_objname, last_dopnet);
-        last_objname = v.OBJNAME;
-        last_dopnet = v.DOPNET;
-        std::string after = tmpl.resolve(last_objname, last_dopnet);
-        if (after != before) parser.SetExpr(after);
+      bool changed = false;
+      if (!tmpl.calls.empty()) {
+        StringValues now = string_values(v);
+        for (size_t k = 0; k < now.size(); ++k) changed = changed || (tmpl.uses[k] && now[k] != last[k]);
+        if (changed) {
+          const std::string before = tmpl.resolve(last);
+          last = std::move(now);
+          std::string after = tmpl.resolve(last);
+          if (after != before) parser.SetExpr(after);
+        }
       }
       return parser.Eval();
     } catch (const mu::Parser::exception_type& e) {

@@ -33,12 +33,17 @@ struct ExprVars {
   double DATACF = 0;    // frame this node's data was created
   std::string OBJNAME;  // object (solver) name
   std::string DOPNET;   // the graph's name
+  std::string ALLOBJIDS;    // the ids of every object this node processes, space-separated
+  std::string ALLOBJNAMES;  // and their names
+  // RELNAME, RELOBJIDS, RELOBJNAMES, RELAFFOBJIDS, RELAFFOBJNAMES: set only when data is attached
+  // to a relationship (a Constraint DOP's anchors); no node here attaches any, so they are empty
   // previous value of each of the node's own channels, by channel name (0 before the first)
   const std::map<std::string, double>* channels = nullptr;
 };
 
 // A compiled muparser expression. Variables are written `$NAME` or `NAME`; strings compare with
-// strcmp($OBJNAME, "sand") (0 when equal) and are resolved when the object's strings change.
+// strcmp($OBJNAME, "sand") (0 when equal; also $DOPNET, $ALLOBJIDS, $ALLOBJNAMES and the REL*
+// variables) and are resolved when the object's strings change.
 class Expression {
  public:
   // channel_names: the node's channel names, readable as local variables (previous values).

@@ -80,16 +80,21 @@ ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
   v.OBJID = obj.objid;
   v.SNOBJ = static_cast<double>(objects_.size());
   v.NOBJ = node >= 0 ? objects_per_node_[node] : 1;
-  // OBJ: this object's position among the objects the node processes, in solver order
-  int index = 0;
-  if (node >= 0)
-    for (const auto& o : objects_) {
-      if (o.get() == &obj) break;
-      bool uses = false;
+  // OBJ: this object's position among the objects the node processes, in solver order;
+  // ALLOBJIDS and ALLOBJNAMES: all of them (without a node, the object alone)
+  int index = 0, count = 0;
+  for (const auto& o : objects_) {
+    bool uses = o.get() == &obj;
+    if (node >= 0) {
       for (const auto& c : o->chain) uses = uses || c.node == node;
       for (int c : o->collider_nodes) uses = uses || c == node;
-      index += uses ? 1 : 0;
     }
+    if (!uses) continue;
+    if (o.get() == &obj) index = count;
+    ++count;
+    v.ALLOBJIDS += (v.ALLOBJIDS.empty() ? "" : " ") + std::to_string(o->objid);
+    v.ALLOBJNAMES += (v.ALLOBJNAMES.empty() ? "" : " ") + o->name;
+  }
   v.OBJ = index;
   v.OBJNAME = obj.name;
   v.DOPNET = graph_.name;

@@ -147,6 +147,30 @@ TEST_CASE("several solvers are separate objects with their own variables", "[eva
   CHECK(vr.z == Approx(1).epsilon(1e-5));
 }
 
+TEST_CASE("ALLOBJIDS and ALLOBJNAMES list the objects a node processes", "[evaluator]") {
+  // `f` feeds both solvers, `g` only the second: each sees its own list
+  const char* g = R"({"grains_graph": 1, "name": "net", "fps": 10, "frames": 1, "nodes": [
+    {"name": "src", "type": "source", "params": {"shape": "grid", "size": [0, 0, 0]}},
+    {"name": "f", "type": "force", "inputs": ["src"], "params": {"force": [
+        "strcmp($ALLOBJNAMES, \"left right\") == 0", "strcmp($ALLOBJIDS, \"0 1\") == 0", 0]}},
+    {"name": "src2", "type": "source", "params": {"shape": "grid", "size": [0, 0, 0]}},
+    {"name": "g", "type": "force", "inputs": ["src2"], "params": {"force": [
+        0, 0, "strcmp($ALLOBJNAMES, \"right\") == 0"]}},
+    {"name": "m", "type": "merge", "inputs": ["f", "g"]},
+    {"name": "left", "type": "solver", "inputs": ["f"]},
+    {"name": "right", "type": "solver", "inputs": ["m"]}]})";
+  Simulation sim(graph_from(g));
+  sim.step_frame();
+  const Vec3 vl = load3(sim.object(0).pts.v3_if("v"), 0);
+  CHECK(vl.x > 0);
+  CHECK(vl.y > 0);
+  // the second object's points: its own from src, then src2's
+  const ParticleStore& r = sim.object(1).pts;
+  REQUIRE(r.size() == 2);
+  CHECK(load3(r.v3_if("v"), 0).x > 0);
+  CHECK(load3(r.v3_if("v"), 1).z > 0);
+}
+
 TEST_CASE("expressions and keyframes drive parameters every substep", "[evaluator]") {
   // force_x = $ST (t): v_x(T) = T^2 / 2 integrated exactly per substep only if the force were
   // piecewise linear; it is sampled at each substep start, so v_x = sum dt * t_k = dt^2 n(n-1)/2.

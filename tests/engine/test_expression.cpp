@@ -150,6 +150,33 @@ TEST_CASE("strcmp compares the object's strings", "[expression]") {
   CHECK_THROWS_AS(Expression("strcmp($OBJNAME, \"sand)", {}), ExprError);
 }
 
+TEST_CASE("strcmp reads the help page's other string variables", "[expression]") {
+  // ALLOBJIDS / ALLOBJNAMES list the objects the node processes; the REL* variables are set only
+  // when data is attached to a relationship, which no node here does: empty strings
+  ExprVars v;
+  v.ALLOBJIDS = "0 1";
+  v.ALLOBJNAMES = "left right";
+  CHECK(eval1("strcmp($ALLOBJIDS, \"0 1\")", v) == 0);
+  CHECK(eval1("strcmp(ALLOBJNAMES, \"left right\")", v) == 0);
+  for (const char* rel : {"RELNAME", "RELOBJIDS", "RELOBJNAMES", "RELAFFOBJIDS", "RELAFFOBJNAMES"}) {
+    INFO(rel);
+    CHECK(eval1(std::string("strcmp($") + rel + ", \"\")", v) == 0);
+  }
+  // a changed list is seen by the same compiled expression
+  Expression e("strcmp($ALLOBJNAMES, \"sand\") == 0", {});
+  v.ALLOBJNAMES = "sand";
+  CHECK(e.eval(v) == 1);
+  v.ALLOBJNAMES = "sand rock";
+  CHECK(e.eval(v) == 0);
+  // an unknown name is refused with the names strcmp takes
+  try {
+    Expression bad("strcmp($OBJNAMES, \"a\")", {});
+    FAIL("no error");
+  } catch (const ExprError& err) {
+    CHECK_THAT(err.what(), Catch::Contains("$ALLOBJNAMES"));
+  }
+}
+
 TEST_CASE("a parse error throws ExprError naming the expression", "[expression]") {
   const std::string bad = "fit($SF, 0, 48, 0";
   try {

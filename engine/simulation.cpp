@@ -92,8 +92,12 @@ ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
     if (!uses) continue;
     if (o.get() == &obj) index = count;
     ++count;
-    v.ALLOBJIDS += (v.ALLOBJIDS.empty() ? "" : " ") + std::to_string(o->objid);
-    v.ALLOBJNAMES += (v.ALLOBJNAMES.empty() ? "" : " ") + o->name;
+    if (count > 1) {
+      v.ALLOBJIDS += ' ';
+      v.ALLOBJNAMES += ' ';
+    }
+    v.ALLOBJIDS += std::to_string(o->objid);
+    v.ALLOBJNAMES += o->name;
   }
   v.OBJ = index;
   v.OBJNAME = obj.name;

@@ -391,11 +391,14 @@ void GrainsSolver::shape_goals(const float* p, int threads) {
 // lands on a corner could only be pushed out through that corner grain's correction, diluted
 // over the component by the fit (1/N of it per iteration): it would sink, and the final
 // collision pass, grain by grain, would bend it (9% of the side for a 1,000-grain cube).
-void GrainsSolver::project_shapes(int threads) {
+// The penetration the shift removes joins each contact's normal sum (the bound of its friction),
+// and the contacts' slip is then taken out of the body as a whole (rigid_collider_friction).
+void GrainsSolver::project_shapes(const gr_grains& g, const gr_params& prm, int threads) {
   shape_goals(p_.data(), threads);
   p_.swap(shape_goal_);
   if (plane_offsets_.size() != n_ + 1) return;
   float* p = p_.data();
+  const bool friction = prm.friction_with_colliders > 0 && collider_normal_.size() == plane_offsets_[n_];
   const long comps = static_cast<long>(comp_offsets_.size()) - 1;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (long c = 0; c < comps; ++c) {
@@ -407,15 +410,92 @@ void GrainsSolver::project_shapes(int threads) {
         Vec3 xs = load3(pl, 0), nrm = load3(pl, 1);
         float d = radius_[i] - dot(load3(p, i) - xs, nrm);
         if (!(d > 0)) continue;
+        if (friction) collider_normal_[e] += d;
         Vec3 m = nrm * d;
         up = {std::max(up.x, m.x), std::max(up.y, m.y), std::max(up.z, m.z)};
         down = {std::min(down.x, m.x), std::min(down.y, m.y), std::min(down.z, m.z)};
       }
     }
     Vec3 shift = up + down;
-    if (shift.x == 0 && shift.y == 0 && shift.z == 0) continue;
-    for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
-      store3(p, comp_members_[k], load3(p, comp_members_[k]) + shift);
+    if (shift.x != 0 || shift.y != 0 || shift.z != 0)
+      for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
+        store3(p, comp_members_[k], load3(p, comp_members_[k]) + shift);
+    if (friction) rigid_collider_friction(static_cast<size_t>(c), g, prm, p);
+  }
+}
+
+// Collider friction of a rigid component (help page "Friction: With Colliders", the law of
+// kernels/collider.h: slip below static_threshold x mu x the normal sum is stopped, above it
+// scale_kinetic x mu x the normal sum of it is taken out), applied to the body, not to its
+// contact grains: a grain's own friction moves only that grain, and the fit passes on 1/N of it,
+// so a 843-grain rock slid down a 25 degree slope it should have rolled down (10 degrees of turn
+// in 4 s). Each contact in turn (Gauss-Seidel, in member order) gets the impulse J = K^-1 D that
+// changes its point's slip by D, K = 1/M - [r]x I^-1 [r]x the body's compliance at r; the body's
+// translation J / M and rotation I^-1 (r x J) add up and move every member once, linearised
+// (the next projection restores the exact rigid shape).
+void GrainsSolver::rigid_collider_friction(size_t c, const gr_grains& g, const gr_params& prm, float* p) {
+  const uint32_t b = comp_offsets_[c], e_end = comp_offsets_[c + 1];
+  bool touching = false;
+  for (uint32_t k = b; k < e_end && !touching; ++k)
+    for (uint32_t e = plane_offsets_[comp_members_[k]]; e < plane_offsets_[comp_members_[k] + 1]; ++e)
+      touching = touching || collider_normal_[e] > 0;
+  if (!touching) return;
+  using V = Eigen::Vector3d;
+  auto at = [](const float* a, uint32_t i) { return V(a[3 * i], a[3 * i + 1], a[3 * i + 2]); };
+  V centre = V::Zero();
+  double mass = 0;
+  for (uint32_t k = b; k < e_end; ++k) {
+    const uint32_t i = comp_members_[k];
+    centre += double(mass_[i]) * at(p, i);
+    mass += mass_[i];
+  }
+  centre /= mass;
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
+  for (uint32_t k = b; k < e_end; ++k) {
+    const uint32_t i = comp_members_[k];
+    const V r = at(p, i) - centre;
+    inertia += double(mass_[i]) * (r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose());
+  }
+  // a line of grains has no inertia about its axis: a trace-relative floor keeps I invertible
+  inertia += 1e-6 * inertia.trace() * Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d inv_inertia = inertia.inverse();
+  auto skew = [](const V& r) {
+    Eigen::Matrix3d m;
+    m << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+    return m;
+  };
+  V move = V::Zero(), turn = V::Zero();
+  for (uint32_t k = b; k < e_end; ++k) {
+    const uint32_t i = comp_members_[k];
+    const V r = at(p, i) - centre;
+    const double mu = double(prm.friction_with_colliders) * (g.friction ? g.friction[i] : 1.0f);
+    for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
+      if (!(collider_normal_[e] > 0)) continue;
+      const float* pl = plane_.data() + 9 * e;
+      const V n(pl[3], pl[4], pl[5]), vc(pl[6], pl[7], pl[8]);
+      // the contact point's slip over the substep, relative to the collider's own motion
+      const V s = (at(p, i) + move + turn.cross(r)) - at(g.P, i) - vc * double(prm.dt);
+      const V slip = s - n * n.dot(s);
+      const double sl = slip.norm();
+      if (!(sl > 0)) continue;
+      const double bound = mu * collider_normal_[e];
+      const double keep = sl < double(prm.static_threshold) * bound
+                              ? 0.0
+                              : 1.0 - std::min(1.0, double(prm.scale_kinetic) * bound / sl);
+      if (keep >= 1.0) continue;
+      const V want = -slip * (1.0 - keep);
+      const Eigen::Matrix3d K = Eigen::Matrix3d::Identity() / mass - skew(r) * inv_inertia * skew(r);
+      const V J = K.ldlt().solve(want);
+      move += J / mass;
+      turn += inv_inertia * r.cross(J);
+    }
+  }
+  for (uint32_t k = b; k < e_end; ++k) {
+    const uint32_t i = comp_members_[k];
+    const V x = at(p, i) + move + turn.cross(at(p, i) - centre);
+    p[3 * i] = static_cast<float>(x.x());
+    p[3 * i + 1] = static_cast<float>(x.y());
+    p[3 * i + 2] = static_cast<float>(x.z());
   }
 }
 
@@ -898,7 +978,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
     }
     p_.swap(p_next_);
-    if (shapes_on) project_shapes(threads);  // friction moved grains one by one
+    if (shapes_on) project_shapes(g, prm, threads);  // friction moved grains one by one
   };
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
@@ -927,7 +1007,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       }
     }
     (chebyshev ? p_before_ : p_next_).swap(p_);
-    if (shapes_on) project_shapes(threads);
+    if (shapes_on) project_shapes(g, prm, threads);
     if (friction_pass && s.accurate_friction) run_friction();
   }
   if (friction_pass && !s.accurate_friction) run_friction();

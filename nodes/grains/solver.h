@@ -133,7 +133,11 @@ class GrainsSolver {
   void drop_constrained_pairs(int threads);
   void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
   void shape_goals(const float* p, int threads);
-  void project_shapes(int threads);
+  // the shape goals, then each component out of its collider planes and, with collider
+  // friction, its contacts' slip taken out as a rigid body (g: the substep's inputs, for P, the
+  // planes and the friction attribute)
+  void project_shapes(const gr_grains& g, const gr_params& prm, int threads);
+  void rigid_collider_friction(size_t component, const gr_grains& g, const gr_params& prm, float* p);
   // P, p in the substep's coordinates, world = those + origin
   void find_planes(const float* P, const float* p, const Vec3& origin,
                    const ColliderState* colliders, size_t collider_count, float query_scale,

@@ -62,8 +62,8 @@ with open(os.path.join(here, "bowl.obj"), "w") as f:
             a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
             f.write("f %d %d %d\nf %d %d %d\n" % (a, b, c, a, c, d))
 
-# rock.obj: a lumpy closed stone about 0.16 m across: an icosahedron subdivided once, each vertex
-# pushed out or in by a fixed pseudo-random factor (0.75 to 1.25 of 0.08 m); wound outward
+# rock.obj: a lumpy closed stone about 0.24 m across: an icosahedron subdivided once, each vertex
+# pushed out or in by a fixed pseudo-random factor (0.75 to 1.25 of 0.12 m); wound outward
 t = (1 + math.sqrt(5)) / 2
 ico_v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
          (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
@@ -84,9 +84,9 @@ for a, b, c in ico_f:
     ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
     faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
 with open(os.path.join(here, "rock.obj"), "w") as f:
-    f.write("# a lumpy stone about 0.16 m across (make_data.py)\n")
+    f.write("# a lumpy stone about 0.24 m across (make_data.py)\n")
     for k, p in enumerate(verts):
-        s = 0.08 * (1 + 0.25 * math.sin(12.9898 * k + 78.233 * (k % 7)))
+        s = 0.12 * (1 + 0.25 * math.sin(12.9898 * k + 78.233 * (k % 7)))
         f.write("v %.6f %.6f %.6f\n" % tuple(s * c for c in p))
     for a, b, c in faces:
         f.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))

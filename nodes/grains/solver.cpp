@@ -6,12 +6,13 @@
 //      per grain (the nearest collider within range), once, or every iteration when asked
 //   3. constraint_iterations Jacobi iterations: gather, average, over-relax (kernels/iterate.h),
 //      Chebyshev-extrapolated when chebyshev_rho > 0;
-//      friction is its own pass after every iteration (accurate_friction) or after the loop
-//      (pins gather with the rest). Rigid shape matching is its own constraint group, projected
-//      after each iteration's averaged update (Gauss-Seidel across groups, Jacobi within one,
-//      as Macklin et al. 2014 Alg. 1): averaged in with a grain's contacts, a goal would pull
-//      only 1/count of the way and a landing cube deformed by 12% of its side; projected, the
-//      components are rigid after every iteration. Goals per component, with Eigen.
+//      friction is its own pass after every iteration (accurate_friction) or after the loop.
+//      Rigid shape matching, then pins, are their own constraint groups, projected after each
+//      iteration's averaged update (Gauss-Seidel across groups, Jacobi within one, as Macklin
+//      et al. 2014 Alg. 1): averaged in with a grain's contacts, a goal would pull only 1/count
+//      of the way and a landing cube deformed by 12% of its side; projected, the components are
+//      rigid after every iteration. Goals per component, with Eigen; pins per grain
+//      (kernels/pin.h).
 //   4. v from the motion, blend and caps, drift (kernels/velocity.h); the final collision pass
 //      (swept, so thin and moving colliders hold); write P and v; collider impulses;
 //      stats.
@@ -969,6 +970,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // 3. Jacobi iterations
   // friction is its own pass (gr_friction_pass), never inside the contact gather
   const bool friction_pass = pair_friction_pass || collider_friction_pass;
+  // pins: their own group, after the averaged update and the shapes (kernels/pin.h)
+  auto project_pins = [&] {
+    float* p = p_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i) gr_store3(p, i, gr_project_pin(&g, &prm, p, static_cast<int>(i)));
+  };
   auto run_friction = [&] {
     const float* p = p_.data();
     float* next = p_next_.data();
@@ -1009,6 +1016,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     (chebyshev ? p_before_ : p_next_).swap(p_);
     if (shapes_on) project_shapes(g, prm, threads);
     if (friction_pass && s.accurate_friction) run_friction();
+    if (g.targetP) project_pins();  // once an iteration, last
   }
   if (friction_pass && !s.accurate_friction) run_friction();
 

@@ -90,7 +90,6 @@ GR_INLINE gr_float3 gr_iterate(const gr_grains* g, const gr_params* prm, const G
   count += ccount;
   sum = gr_add(sum, csum);
   if (g->con_offsets) count += gr_gather_constraints(g, prm, p, i, &sum);
-  if (g->targetP) count += gr_gather_pin(g, prm, p, i, &sum);
   if (acc->collider_dx && ccount)
     gr_add_collider_dx(acc->collider_dx, i, csum,
                        gr_average_factor(count, prm->over_relaxation, prm->disable_constraint_averaging), pen);

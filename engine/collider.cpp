@@ -121,6 +121,22 @@ Vec3 ColliderState::velocity_at(const Vec3& p) const {
   return (p - carried_back(p)) / dt;
 }
 
+bool ColliderState::shell() const {
+  return shape.kind == ShapeKind::Mesh && shape.mesh && !shape.mesh->closed();
+}
+
+float ColliderState::shell_crossing(const Vec3& a, const Vec3& b, Vec3* at, Vec3* side) const {
+  if (!shell()) return 2.0f;
+  const Vec3 la = prev_pose.inverse(a), lb = pose.inverse(b);
+  Vec3 n;
+  const float t = shape.mesh->crossing(la, lb, &n);
+  if (!(t <= 1.0f)) return 2.0f;
+  *at = pose.apply(la + (lb - la) * t);
+  // the point came from the side its path leaves behind
+  *side = pose.rotate(dot(lb - la, n) > 0 ? -n : n);
+  return t;
+}
+
 bool ColliderState::still() const {
   for (int k = 0; k < 9; ++k)
     if (pose.R[k] != prev_pose.R[k]) return false;

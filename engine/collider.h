@@ -68,6 +68,14 @@ struct ColliderState {
   // (end of substep, world), relative to the collider's own motion. Returns the fraction in
   // [0,1] of the first time its distance reaches `radius`, or a value > 1 when it never does.
   float sweep(const Vec3& a, const Vec3& b, float radius) const;
+  // True for an open mesh: a two-sided shell with no inside, whose distance cannot tell which
+  // side a grain is on.
+  bool shell() const;
+  // For a shell: where a point moving from `a` (start of substep, world) to `b` (end, world)
+  // passed through it, relative to its motion. Returns the fraction along the path (> 1 when it
+  // did not), *at the crossing point carried to the end pose and *side the shell's normal
+  // there turned toward the side the point came from.
+  float shell_crossing(const Vec3& a, const Vec3& b, Vec3* at, Vec3* side) const;
   // True when the collider did not move over the substep (same pose, bit for bit).
   bool still() const;
 };

@@ -59,6 +59,43 @@ double box_distance2(const float* lo, const float* hi, const D3& p) {
   return s;
 }
 
+// The parameter range [t0, t1] within [0, 1] over which p + t d lies in the box [lo, hi]
+// (slab test); false when it never does. inv_d: 1 / d per axis (infinite for a zero component).
+bool segment_box(const float* lo, const float* hi, const D3& p, const D3& inv_d, double* t_in) {
+  const double q[3] = {p.x, p.y, p.z}, id[3] = {inv_d.x, inv_d.y, inv_d.z};
+  double t0 = 0, t1 = 1;
+  for (int k = 0; k < 3; ++k) {
+    if (std::isinf(id[k])) {
+      if (q[k] < lo[k] || q[k] > hi[k]) return false;
+      continue;
+    }
+    double ta = (lo[k] - q[k]) * id[k], tb = (hi[k] - q[k]) * id[k];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  *t_in = t0;
+  return true;
+}
+
+// Where p + t d meets triangle (a, b, c), t in [0, 1] (Moeller & Trumbore 1997); a negative
+// value when it does not. Points on an edge count for both triangles that share it.
+double segment_triangle(const D3& p, const D3& d, const D3& a, const D3& b, const D3& c) {
+  const D3 e1 = b - a, e2 = c - a, h = cross(d, e2);
+  const double det = dot(e1, h);
+  if (std::fabs(det) < 1e-300) return -1;  // parallel
+  const double inv = 1.0 / det;
+  const D3 s = p - a;
+  const double u = dot(s, h) * inv;
+  if (u < 0 || u > 1) return -1;
+  const D3 q = cross(s, e1);
+  const double v = dot(d, q) * inv;
+  if (v < 0 || u + v > 1) return -1;
+  const double t = dot(e2, q) * inv;
+  return t >= 0 && t <= 1 ? t : -1;
+}
+
 Vec3 unit(const D3& v) {
   double l = std::sqrt(dot(v, v));
   if (!(l > 0)) return {0, 1, 0};
@@ -264,6 +301,36 @@ std::shared_ptr<const MeshShape> MeshShape::build(const Mesh& in, std::string* p
     for (int k = 0; k < 3; ++k) s.edge_n_[3 * i + k] = unit(edge_d[3 * t + k]);
   }
   return shape;
+}
+
+float MeshShape::crossing(const Vec3& af, const Vec3& bf, Vec3* normal) const {
+  const D3 p = d3(af), d = d3(bf) - p;
+  const double inf = std::numeric_limits<double>::infinity();
+  const D3 inv_d{d.x != 0 ? 1 / d.x : inf, d.y != 0 ? 1 / d.y : inf, d.z != 0 ? 1 / d.z : inf};
+  double best = inf;
+  int best_t = -1;
+  int stack[64];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node& nd = nodes_[stack[--top]];
+    double t_in;
+    if (!segment_box(nd.lo, nd.hi, p, inv_d, &t_in) || t_in > best) continue;
+    if (nd.count == 0) {
+      stack[top++] = nd.first;
+      stack[top++] = nd.first + 1;
+      continue;
+    }
+    for (int i = nd.first; i < nd.first + nd.count; ++i) {
+      const auto& t = tri_[i];
+      const double hit = segment_triangle(p, d, d3(mesh_.vertices[t[0]]),
+                                          d3(mesh_.vertices[t[1]]), d3(mesh_.vertices[t[2]]));
+      if (hit >= 0 && hit < best) best = hit, best_t = i;
+    }
+  }
+  if (best_t < 0) return 2.0f;
+  if (normal) *normal = face_n_[best_t];
+  return static_cast<float>(best);
 }
 
 float MeshShape::distance(const Vec3& pf, Vec3* normal, float within) const {

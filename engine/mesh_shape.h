@@ -37,6 +37,12 @@ class MeshShape {
   float distance(const Vec3& p, Vec3* normal,
                  float within = std::numeric_limits<float>::infinity()) const;
 
+  // The first point where the segment a -> b (local) passes through a triangle: returns its
+  // fraction along the segment in [0, 1] and the triangle's unit normal, or a value > 1 when
+  // the segment touches no triangle. A shell has no inside, so this is how a grain that went
+  // through one is told from one that stayed on its side.
+  float crossing(const Vec3& a, const Vec3& b, Vec3* normal) const;
+
   bool closed() const { return closed_; }
   size_t triangle_count() const { return tri_.size(); }
   Vec3 lower() const { return lo_; }  // bounding box of the vertices

@@ -119,7 +119,9 @@ struct SweptFriction {
 //    or moving collider: the grain is put where the trace first reached distance r, carried by
 //    the collider to its end pose, and pushed out to r. The r/2 test keeps grains sliding along
 //    a surface at distance ~r from counting as hits.
-// Either way the velocity component into the collider is removed. A tunnelling grain's contact
+//  - a path through a shell (an open mesh, which has no inside) is put back at r on the side
+//    it came from, whatever its distances say (first of the three).
+// Every way the velocity component into the collider is removed. A tunnelling grain's contact
 // was never seen by the iterations, so its collider friction was not applied either: the pass
 // applies it (`friction`) to the hit. An end point within r was in the iterations' contact
 // planes, which already had its friction. *hit receives the index of the last collider that
@@ -142,6 +144,22 @@ void final_collision(const ColliderState* colliders, const uint8_t* still, size_
     // ends more than r/2 + |b - a| away never came within r/2 of it: the sweep would find no
     // hit (checked with a 1% margin on r/2, far above the trace's tolerance and float error).
     if (!near && still[c] && e > 0.505f * r + length(b - a)) continue;
+    // A shell has no inside, so its distance cannot tell a grain pressed through it by its
+    // neighbours (or one that started within r/2, where the sweep below reports nothing) from
+    // one on its own side: the path's crossing can. Such a grain is put back at r on the side
+    // it came from; as with a tunnelled grain, the iterations never held it there, so the
+    // pass applies the friction.
+    Vec3 at, side;
+    if (col.shell_crossing(a, b, &at, &side) <= 1.0f) {
+      b = at + side * r;
+      const float eb = col.distance(b, &n);
+      if (eb < r) b += n * (r - eb);
+      const Vec3 vc = col.velocity_at(b);
+      friction.apply(v, side, vc, remove_inward_velocity(v, side, vc));
+      *hit = static_cast<int32_t>(c);
+      *hit_n = side;
+      continue;
+    }
     float t_half = 2.0f;  // > 1: no hit
     if (!near || dot(b - a, n) > 0) t_half = col.sweep(a, b, 0.5f * r);
     if (!(t_half > 0.0f && t_half <= 1.0f)) {  // 0: started deep (and left), > 1: no hit

@@ -124,6 +124,22 @@ TEST_CASE("an open mesh is a two-sided shell", "[mesh][colliders]") {
   CHECK_FALSE(build(cup)->closed());
 }
 
+TEST_CASE("a segment through a shell finds its first crossing", "[mesh][colliders]") {
+  // A segment down through a sheet crosses it where y = 0; one that passes beside it or stops
+  // short crosses nothing.
+  const auto open = build(test::quad_mesh(1.0f));
+  Vec3 n;
+  CHECK(open->crossing({0.2f, 0.3f, 0.1f}, {0.2f, -0.1f, 0.1f}, &n) == Approx(0.75f));
+  CHECK(std::fabs(n.y) == Approx(1.0f));
+  CHECK(open->crossing({0.2f, 0.3f, 0.1f}, {0.2f, 0.01f, 0.1f}, &n) > 1.0f);  // stops short
+  CHECK(open->crossing({1.2f, 0.3f, 0.1f}, {1.2f, -0.3f, 0.1f}, &n) > 1.0f);  // beside the sheet
+  CHECK(open->crossing({-2, 0.5f, 0}, {2, -0.5f, 0}, &n) == Approx(0.5f));   // long and slanted
+  // through two walls of a box: the first one counts
+  const auto box = build(test::box_mesh({0, 0, 0}, {1, 1, 1}));
+  CHECK(box->crossing({-1, 0.1f, 0.2f}, {1, 0.1f, 0.2f}, &n) == Approx(0.25f));
+  CHECK(std::fabs(n.x) == Approx(1.0f));
+}
+
 TEST_CASE("a mesh without usable triangles is refused", "[mesh][colliders]") {
   std::string problem;
   Mesh points;

@@ -27,15 +27,7 @@ std::string replace(std::string s, const std::string& from, const std::string& t
 }
 
 // Loads `text` and returns the error; fails the test if it loads.
-LoadError error_of(const std::string& text) {
-  try {
-    graph_from(text, "bad.json");
-  } catch (const LoadError& e) {
-    return e;
-  }
-  FAIL("the graph loaded, but it should have been refused");
-  return LoadError("", "", "");
-}
+LoadError error_of(const std::string& text) { return test::refusal_of(text, "bad.json"); }
 
 void check_error(const std::string& text, const std::string& pointer, const std::string& words) {
   LoadError e = error_of(text);

@@ -10,6 +10,7 @@
 #include "engine/dem_measures.h"
 #include "engine/graph.h"
 #include "engine/simulation.h"
+#include "tests/support/rigid_fit.h"
 #include "tests/support/support.h"
 
 using namespace grains;
@@ -329,20 +330,11 @@ TEST_CASE("keyframed_grains: the pinned interior follows its keyframes and carri
     double lag = 0;
     for (size_t k : inner) lag = std::max(lag, double(length(load3(P, k) - load3(T, k))));
     // the interior's rigid motion (least squares), applied to the skin's rest positions
-    Eigen::Vector3d c = Eigen::Vector3d::Zero(), c0 = Eigen::Vector3d::Zero();
-    auto at = [](const float* a, size_t k) { return Eigen::Vector3d(a[3 * k], a[3 * k + 1], a[3 * k + 2]); };
-    for (size_t k : inner) {
-      c += at(P, k) / double(inner.size());
-      c0 += at(rest, k) / double(inner.size());
-    }
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    for (size_t k : inner) A += (at(P, k) - c) * (at(rest, k) - c0).transpose();
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d U = svd.matrixU();
-    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
-    const Eigen::Matrix3d R = U * svd.matrixV().transpose();
+    std::vector<Eigen::Vector3d> now, at_rest;
+    for (size_t k : inner) now.push_back(test::point_of(P, k)), at_rest.push_back(test::point_of(rest, k));
+    const test::RigidFit fit = test::rigid_fit(now, at_rest);
     std::vector<double> off;
-    for (size_t k : skin) off.push_back((at(P, k) - (c + R * (at(rest, k) - c0))).norm());
+    for (size_t k : skin) off.push_back((test::point_of(P, k) - fit.place(test::point_of(rest, k))).norm());
     std::sort(off.begin(), off.end());
     INFO("frame " << f << ": interior lag " << lag << " m; skin off median " << off[off.size() / 2]
                   << ", 95th percentile " << off[off.size() * 95 / 100]);
@@ -424,27 +416,15 @@ TEST_CASE("rigid_rocks: shape-matched rocks tumble down the slope and stay rigid
   for (size_t k = 0; k < pts.size(); ++k) rocks[stream[k]].push_back(k);
   REQUIRE(rocks.size() == 3);
   for (const auto& [id, members] : rocks) {
-    Eigen::Vector3d c = Eigen::Vector3d::Zero(), c0 = Eigen::Vector3d::Zero();
-    for (size_t k : members) {
-      c += Eigen::Vector3d(P[3 * k], P[3 * k + 1], P[3 * k + 2]) / double(members.size());
-      c0 += Eigen::Vector3d(rest[3 * k], rest[3 * k + 1], rest[3 * k + 2]) / double(members.size());
-    }
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    for (size_t k : members)
-      A += (Eigen::Vector3d(P[3 * k], P[3 * k + 1], P[3 * k + 2]) - c) *
-           (Eigen::Vector3d(rest[3 * k], rest[3 * k + 1], rest[3 * k + 2]) - c0).transpose();
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d U = svd.matrixU();
-    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
-    const Eigen::Matrix3d R = U * svd.matrixV().transpose();
+    std::vector<Eigen::Vector3d> now, at_rest;
+    for (size_t k : members) now.push_back(test::point_of(P, k)), at_rest.push_back(test::point_of(rest, k));
+    const test::RigidFit fit = test::rigid_fit(now, at_rest);
     double worst = 0;
     for (size_t k : members) {
-      const Eigen::Vector3d goal =
-          c + R * (Eigen::Vector3d(rest[3 * k], rest[3 * k + 1], rest[3 * k + 2]) - c0);
-      worst = std::max(worst, (Eigen::Vector3d(P[3 * k], P[3 * k + 1], P[3 * k + 2]) - goal).norm());
+      worst = std::max(worst, (test::point_of(P, k) - fit.place(test::point_of(rest, k))).norm());
       CHECK(P[3 * k + 1] >= -0.35f + r[k] * (1 - 1e-3f));
     }
-    const double turned = std::acos(std::clamp((R.trace() - 1) / 2, -1.0, 1.0)) * 180 / M_PI;
+    const double turned = std::acos(std::clamp((fit.R.trace() - 1) / 2, -1.0, 1.0)) * 180 / M_PI;
     INFO("rock " << id << ": off its rigid shape by " << worst << " m, turned " << turned << " deg");
     CHECK(worst < 1e-5);
     CHECK(turned > 90);

@@ -1,5 +1,6 @@
 #include "tests/support/support.h"
 
+#include <catch2/catch.hpp>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,6 +24,16 @@ std::string temp_dir(const std::string& tag) {
 Graph graph_from(const std::string& text, const std::string& file) {
   register_builtin_nodes();
   return parse_graph(text, file);
+}
+
+LoadError refusal_of(const std::string& text, const std::string& file) {
+  try {
+    graph_from(text, file);
+  } catch (const LoadError& e) {
+    return e;
+  }
+  FAIL("the graph loaded, but it should have been refused");
+  return LoadError("", "", "");
 }
 
 std::string write_file(const std::string& dir, const std::string& name, const std::string& text) {

@@ -15,6 +15,8 @@ namespace grains::test {
 std::string temp_dir(const std::string& tag);
 // Parses a graph from text; registers the built-in nodes first.
 Graph graph_from(const std::string& json_text, const std::string& file = "test.json");
+// Parses a graph that must be refused and returns the error; fails the test if it loads.
+LoadError refusal_of(const std::string& json_text, const std::string& file = "bad.json");
 // Writes text to a file and returns its path.
 std::string write_file(const std::string& dir, const std::string& name, const std::string& text);
 // Runs the grains binary with arguments; returns its exit code; output goes to `log`.

@@ -7,40 +7,24 @@
 #include <cmath>
 
 #include "tests/nodes/grains/grains_harness.h"
+#include "tests/support/rigid_fit.h"
 
 using namespace grains;
 using namespace grains::test;
 
 namespace {
 
-// The largest distance of a grain from the best-fit rigid placement of the rest shape `rest`
-// (least squares: centroid + the rotation of the SVD of the cross-covariance).
+// The largest distance of a grain from the best-fit rigid placement of the rest shape `rest`.
 double deformation(const Scene& sc, const std::vector<Vec3>& rest) {
-  const size_t n = rest.size();
-  Eigen::Vector3d c = Eigen::Vector3d::Zero(), c0 = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < n; ++i) {
-    Vec3 x = sc.pos(i);
-    c += Eigen::Vector3d(x.x, x.y, x.z);
-    c0 += Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z);
+  auto ev = [](const Vec3& x) { return Eigen::Vector3d(x.x, x.y, x.z); };
+  std::vector<Eigen::Vector3d> now, at_rest;
+  for (size_t i = 0; i < rest.size(); ++i) {
+    now.push_back(ev(sc.pos(i)));
+    at_rest.push_back(ev(rest[i]));
   }
-  c /= n;
-  c0 /= n;
-  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-  for (size_t i = 0; i < n; ++i) {
-    Vec3 x = sc.pos(i);
-    A += (Eigen::Vector3d(x.x, x.y, x.z) - c) *
-         (Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z) - c0).transpose();
-  }
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d U = svd.matrixU();
-  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
-  Eigen::Matrix3d R = U * svd.matrixV().transpose();
+  const RigidFit fit = rigid_fit(now, at_rest);
   double worst = 0;
-  for (size_t i = 0; i < n; ++i) {
-    Vec3 x = sc.pos(i);
-    Eigen::Vector3d g = c + R * (Eigen::Vector3d(rest[i].x, rest[i].y, rest[i].z) - c0);
-    worst = std::max(worst, (Eigen::Vector3d(x.x, x.y, x.z) - g).norm());
-  }
+  for (size_t i = 0; i < now.size(); ++i) worst = std::max(worst, (now[i] - fit.place(at_rest[i])).norm());
   return worst;
 }
 

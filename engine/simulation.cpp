@@ -19,7 +19,7 @@ Simulation::~Simulation() = default;
 
 Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads_(threads) {
   if (threads_ > 0) omp_set_num_threads(threads_);
-  objects_per_node_.assign(graph_.nodes.size(), 0);
+  node_objects_.resize(graph_.nodes.size());
   for (size_t s = 0; s < graph_.solvers.size(); ++s) {
     auto obj = std::make_unique<SimObject>();
     int solver = graph_.solvers[s];
@@ -55,18 +55,24 @@ Simulation::Simulation(const Graph& graph, int threads) : graph_(graph), threads
       c.impl = d.info->make ? d.info->make() : nullptr;
       c.params = ParamSet(d.info->params, d.params);
       obj->chain.push_back(std::move(c));
-      objects_per_node_[k]++;
+      node_objects_[k].add(obj.get());
     }
 
     for (const auto& name : SolverParams::read(obj->chain.back().params).colliders) {
       int ci = graph_.find(name);
       obj->collider_nodes.push_back(ci);
       obj->collider_params.emplace_back(graph_.nodes[ci].info->params, graph_.nodes[ci].params);
-      objects_per_node_[ci]++;
+      node_objects_[ci].add(obj.get());
     }
     obj->colliders.resize(obj->collider_nodes.size());
     objects_.push_back(std::move(obj));
   }
+  for (NodeObjects& no : node_objects_)
+    for (const SimObject* o : no.objects) {
+      if (!no.ids.empty()) no.ids += ' ', no.names += ' ';
+      no.ids += std::to_string(o->objid);
+      no.names += o->name;
+    }
 }
 
 ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
@@ -79,27 +85,18 @@ ExprVars Simulation::vars_for(const SimObject& obj, int node, double st) const {
   v.F = v.SF + 1;
   v.OBJID = obj.objid;
   v.SNOBJ = static_cast<double>(objects_.size());
-  v.NOBJ = node >= 0 ? objects_per_node_[node] : 1;
-  // OBJ: this object's position among the objects the node processes, in solver order;
-  // ALLOBJIDS and ALLOBJNAMES: all of them (without a node, the object alone)
-  int index = 0, count = 0;
-  for (const auto& o : objects_) {
-    bool uses = o.get() == &obj;
-    if (node >= 0) {
-      for (const auto& c : o->chain) uses = uses || c.node == node;
-      for (int c : o->collider_nodes) uses = uses || c == node;
-    }
-    if (!uses) continue;
-    if (o.get() == &obj) index = count;
-    ++count;
-    if (count > 1) {
-      v.ALLOBJIDS += ' ';
-      v.ALLOBJNAMES += ' ';
-    }
-    v.ALLOBJIDS += std::to_string(o->objid);
-    v.ALLOBJNAMES += o->name;
+  // OBJ: this object's position among the objects the node processes; ALLOBJIDS and
+  // ALLOBJNAMES: all of them (without a node, the object alone)
+  if (node >= 0) {
+    const NodeObjects& no = node_objects_[node];
+    v.NOBJ = static_cast<double>(no.objects.size());
+    v.OBJ = static_cast<double>(std::find(no.objects.begin(), no.objects.end(), &obj) - no.objects.begin());
+    v.ALLOBJIDS = no.ids;
+    v.ALLOBJNAMES = no.names;
+  } else {
+    v.ALLOBJIDS = std::to_string(obj.objid);
+    v.ALLOBJNAMES = obj.name;
   }
-  v.OBJ = index;
   v.OBJNAME = obj.name;
   v.DOPNET = graph_.name;
   return v;

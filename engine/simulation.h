@@ -139,7 +139,16 @@ class Simulation {
   size_t max_points_ = kDefaultMaxPoints;
   int frame_ = 0;
   std::vector<std::unique_ptr<SimObject>> objects_;
-  std::vector<int> objects_per_node_;  // NOBJ for each node
+  // The objects each node processes, in solver order ($OBJ, $NOBJ), and their ids and names as
+  // the space-separated strings $ALLOBJIDS and $ALLOBJNAMES; fixed once the objects are built.
+  struct NodeObjects {
+    std::vector<const SimObject*> objects;
+    std::string ids, names;
+    void add(const SimObject* o) {  // once, however many ways the object uses the node
+      if (objects.empty() || objects.back() != o) objects.push_back(o);
+    }
+  };
+  std::vector<NodeObjects> node_objects_;
 };
 
 // Computes the per-frame diagnostics of an object's points (penetration, energy, strain).

@@ -311,8 +311,10 @@ TEST_CASE("keyframed_grains: the pinned interior follows its keyframes and carri
   // range 1.35 x the summed radii, inside the lattice's diagonal at 1.41) and friction. Pins are
   // their own constraint group, so every interior grain is on its target within 1 mm (a
   // twentieth of the separation) while the skin presses on it. The skin follows: measured from
-  // where the interior's rigid motion carries its rest position, the median skin grain is
-  // within one separation (2 cm) and 95% within two (a clumped skin sags about 1.5 cm).
+  // where the interior's rigid motion carries its rest position, a skin grain that keeps its
+  // place among its neighbours is within one separation (2 cm) of it, one that has slid past a
+  // neighbour farther. The median skin grain must keep its place; the outermost layer, up to
+  // three grains from a pin, held only by clumping, may sag by one more place (95% within 4 cm).
   auto sim = std::make_unique<Simulation>(example("keyframed_grains"));
   for (int f = 1; f <= 36; ++f) {
     sim->step_frame();

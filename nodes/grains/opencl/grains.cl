@@ -1,8 +1,9 @@
-/* The grains kernels compiled as OpenCL C 1.2 (ctest `opencl_kernels_compile`): every shared
- * header, and one kernel that calls the per-grain steps of a substep (predict, the iteration,
- * pre-stabilization, the friction pass, the velocity update), so that code generation, not only
- * parsing, sees the code the CPU path runs. Nothing here runs yet: it keeps the one copy of the
- * math compilable for the OpenCL backend (issue: the whole substep on an OpenCL device). */
+/* The grains kernels as one OpenCL C 1.2 program: every shared header (nodes/grains/kernels/,
+ * the same code the CPU path compiles) and, so far, one kernel that calls the per-grain steps of
+ * a substep (predict, the iteration, pre-stabilization, the friction pass, the velocity update).
+ * `grains devices` builds this program on each device it lists, and the ctest
+ * opencl_kernels_compile compiles it to SPIR with clang, so that code generation, not only
+ * parsing, sees the code the CPU path runs. The substep does not run on a device yet. */
 #include "clumping.h"
 #include "collider.h"
 #include "contact.h"

@@ -1,0 +1,154 @@
+#include "nodes/grains/opencl/device.h"
+
+#define CL_TARGET_OPENCL_VERSION 120
+#include <CL/cl.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "nodes/grains/opencl/sources.h"
+
+namespace grains::opencl {
+namespace {
+
+std::string platform_text(cl_platform_id p, cl_platform_info what) {
+  size_t n = 0;
+  if (clGetPlatformInfo(p, what, 0, nullptr, &n) != CL_SUCCESS || n == 0) return "";
+  std::string s(n, '\0');
+  clGetPlatformInfo(p, what, n, s.data(), nullptr);
+  while (!s.empty() && s.back() == '\0') s.pop_back();
+  return s;
+}
+
+std::string device_text(cl_device_id d, cl_device_info what) {
+  size_t n = 0;
+  if (clGetDeviceInfo(d, what, 0, nullptr, &n) != CL_SUCCESS || n == 0) return "";
+  std::string s(n, '\0');
+  clGetDeviceInfo(d, what, n, s.data(), nullptr);
+  while (!s.empty() && s.back() == '\0') s.pop_back();
+  return s;
+}
+
+std::vector<cl_platform_id> platform_ids(cl_int* status) {
+  cl_uint n = 0;
+  *status = clGetPlatformIDs(0, nullptr, &n);
+  if (*status != CL_SUCCESS || n == 0) return {};
+  std::vector<cl_platform_id> ids(n);
+  *status = clGetPlatformIDs(n, ids.data(), nullptr);
+  if (*status != CL_SUCCESS) return {};
+  return ids;
+}
+
+std::vector<cl_device_id> device_ids(cl_platform_id p) {
+  cl_uint n = 0;
+  if (clGetDeviceIDs(p, CL_DEVICE_TYPE_ALL, 0, nullptr, &n) != CL_SUCCESS || n == 0) return {};
+  std::vector<cl_device_id> ids(n);
+  if (clGetDeviceIDs(p, CL_DEVICE_TYPE_ALL, n, ids.data(), nullptr) != CL_SUCCESS) return {};
+  return ids;
+}
+
+// A fresh folder holding the embedded sources, for the compiler's -I; removed when destroyed.
+struct SourceFolder {
+  std::filesystem::path path;
+  SourceFolder() {
+    std::random_device rd;
+    path = std::filesystem::temp_directory_path() /
+           ("grains-opencl-" + std::to_string(rd()) + "-" + std::to_string(rd()));
+    std::filesystem::create_directories(path);
+    for (const SourceFile& f : kernel_sources()) std::ofstream(path / f.name) << f.text;
+  }
+  ~SourceFolder() {
+    std::error_code ec;
+    std::filesystem::remove_all(path, ec);
+  }
+};
+
+}  // namespace
+
+std::vector<Platform> platforms(std::string* problem) {
+  cl_int status = CL_SUCCESS;
+  const std::vector<cl_platform_id> ids = platform_ids(&status);
+  if (ids.empty()) {
+    *problem = "no OpenCL platform found (clGetPlatformIDs: " + std::to_string(status) +
+               "): install an OpenCL driver, for example Debian's pocl-opencl-icd for the CPU";
+    return {};
+  }
+  std::vector<Platform> out;
+  for (cl_platform_id p : ids) {
+    Platform pl;
+    pl.name = platform_text(p, CL_PLATFORM_NAME);
+    pl.vendor = platform_text(p, CL_PLATFORM_VENDOR);
+    pl.version = platform_text(p, CL_PLATFORM_VERSION);
+    for (cl_device_id d : device_ids(p)) {
+      Device dv;
+      dv.name = device_text(d, CL_DEVICE_NAME);
+      dv.version = device_text(d, CL_DEVICE_VERSION);
+      dv.c_version = device_text(d, CL_DEVICE_OPENCL_C_VERSION);
+      cl_device_type type = 0;
+      clGetDeviceInfo(d, CL_DEVICE_TYPE, sizeof type, &type, nullptr);
+      dv.type = (type & CL_DEVICE_TYPE_GPU)           ? "gpu"
+                : (type & CL_DEVICE_TYPE_CPU)         ? "cpu"
+                : (type & CL_DEVICE_TYPE_ACCELERATOR) ? "accelerator"
+                                                      : "other";
+      cl_uint units = 0;
+      clGetDeviceInfo(d, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof units, &units, nullptr);
+      dv.compute_units = units;
+      cl_ulong memory = 0;
+      clGetDeviceInfo(d, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof memory, &memory, nullptr);
+      dv.global_memory = memory;
+      pl.devices.push_back(dv);
+    }
+    out.push_back(std::move(pl));
+  }
+  return out;
+}
+
+BuildResult build_kernels(size_t platform, size_t device) {
+  BuildResult r;
+  cl_int status = CL_SUCCESS;
+  const std::vector<cl_platform_id> pids = platform_ids(&status);
+  if (platform >= pids.size()) {
+    r.log = "no platform " + std::to_string(platform);
+    return r;
+  }
+  const std::vector<cl_device_id> dids = device_ids(pids[platform]);
+  if (device >= dids.size()) {
+    r.log = "no device " + std::to_string(device) + " on platform " + std::to_string(platform);
+    return r;
+  }
+  cl_device_id d = dids[device];
+  cl_context ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
+  if (!ctx) {
+    r.log = "clCreateContext failed (" + std::to_string(status) + ")";
+    return r;
+  }
+  const SourceFolder folder;
+  std::string main_text;
+  for (const SourceFile& f : kernel_sources())
+    if (std::string(f.name) == "grains.cl") main_text = f.text;
+  const char* text = main_text.c_str();
+  cl_program program = clCreateProgramWithSource(ctx, 1, &text, nullptr, &status);
+  const auto start = std::chrono::steady_clock::now();
+  if (program) {
+    // the folder is a plain name under the temporary directory: no quotes (PoCL passes them on)
+    const std::string options = "-cl-std=CL1.2 -I " + folder.path.string();
+    status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
+    r.ok = status == CL_SUCCESS;
+    size_t n = 0;
+    clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);
+    std::string log(n, '\0');
+    if (n > 0) clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, n, log.data(), nullptr);
+    while (!log.empty() && (log.back() == '\0' || log.back() == '\n')) log.pop_back();
+    r.log = r.ok ? log : "clBuildProgram failed (" + std::to_string(status) + "):\n" + log;
+    clReleaseProgram(program);
+  } else {
+    r.log = "clCreateProgramWithSource failed (" + std::to_string(status) + ")";
+  }
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  clReleaseContext(ctx);
+  return r;
+}
+
+}  // namespace grains::opencl

@@ -1,0 +1,39 @@
+// OpenCL platforms and devices, and building the grains kernels on one: the first part of the
+// OpenCL backend. `grains devices` lists what the OpenCL loader finds and whether each device
+// builds the kernels (the substep does not run on a device yet: `grains run --opencl` says so).
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace grains::opencl {
+
+struct Device {
+  std::string name;
+  std::string type;       // "cpu", "gpu", "accelerator" or "other"
+  std::string version;    // CL_DEVICE_VERSION
+  std::string c_version;  // CL_DEVICE_OPENCL_C_VERSION
+  uint32_t compute_units = 0;
+  uint64_t global_memory = 0;  // bytes
+};
+
+struct Platform {
+  std::string name, vendor, version;
+  std::vector<Device> devices;
+};
+
+// Every platform the OpenCL loader finds, with its devices. None: returns an empty list and
+// sets *problem to why (no loader configuration, no driver installed).
+std::vector<Platform> platforms(std::string* problem);
+
+struct BuildResult {
+  bool ok = false;
+  double seconds = 0;  // wall time of the build
+  std::string log;     // the compiler's log (its errors when !ok)
+};
+
+// Builds the grains program (opencl/grains.cl and the kernel headers, as embedded at build time)
+// for OpenCL C 1.2 on device `device` of platform `platform` (indices into platforms()).
+BuildResult build_kernels(size_t platform, size_t device);
+
+}  // namespace grains::opencl

@@ -325,7 +325,7 @@ float MeshShape::crossing(const Vec3& af, const Vec3& bf, Vec3* normal) const {
       const auto& t = tri_[i];
       const double hit = segment_triangle(p, d, d3(mesh_.vertices[t[0]]),
                                           d3(mesh_.vertices[t[1]]), d3(mesh_.vertices[t[2]]));
-      if (hit >= 0 && hit < best) best = hit, best_t = i;
+      if (hit > 0 && hit < best) best = hit, best_t = i;  // a start on the surface is on no side
     }
   }
   if (best_t < 0) return 2.0f;

@@ -38,8 +38,8 @@ class MeshShape {
                  float within = std::numeric_limits<float>::infinity()) const;
 
   // The first point where the segment a -> b (local) passes through a triangle: returns its
-  // fraction along the segment in [0, 1] and the triangle's unit normal, or a value > 1 when
-  // the segment touches no triangle. A shell has no inside, so this is how a grain that went
+  // fraction along the segment in (0, 1] and the triangle's unit normal, or a value > 1 when
+  // the segment touches no triangle after its start (a start on the surface is on no side). A shell has no inside, so this is how a grain that went
   // through one is told from one that stayed on its side.
   float crossing(const Vec3& a, const Vec3& b, Vec3* normal) const;
 

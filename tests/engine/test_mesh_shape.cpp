@@ -134,6 +134,8 @@ TEST_CASE("a segment through a shell finds its first crossing", "[mesh][collider
   CHECK(open->crossing({0.2f, 0.3f, 0.1f}, {0.2f, 0.01f, 0.1f}, &n) > 1.0f);  // stops short
   CHECK(open->crossing({1.2f, 0.3f, 0.1f}, {1.2f, -0.3f, 0.1f}, &n) > 1.0f);  // beside the sheet
   CHECK(open->crossing({-2, 0.5f, 0}, {2, -0.5f, 0}, &n) == Approx(0.5f));   // long and slanted
+  CHECK(open->crossing({0.2f, 0, 0.1f}, {0.2f, -0.3f, 0.1f}, &n) > 1.0f);  // starts on it: no side
+  CHECK(open->crossing({0.2f, 0.3f, 0.1f}, {0.2f, 0, 0.1f}, &n) == Approx(1.0f));  // ends on it
   // through two walls of a box: the first one counts
   const auto box = build(test::box_mesh({0, 0, 0}, {1, 1, 1}));
   CHECK(box->crossing({-1, 0.1f, 0.2f}, {1, 0.1f, 0.2f}, &n) == Approx(0.25f));

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <optional>
@@ -410,22 +411,42 @@ int cmd_heap(const std::string& path, double d, double cx, double cz) {
   return 0;
 }
 
-// grains devices: every OpenCL platform and device, each device's build of the grains kernels.
-// No platform: exit 2 with the reason; a device that fails the build: its compiler log, exit 1.
-int cmd_devices() {
+// grains devices: every OpenCL platform and device, each device's build of the grains kernels;
+// with a choice (--device P:D, else GRAINS_OPENCL_DEVICE), that device only. No platform, or a
+// choice that is malformed or names no device: exit 2 with the reason; a device that fails the
+// build: its compiler log, exit 1.
+int cmd_devices(std::string choice_text) {
+  std::string where = "--device";
+  if (choice_text.empty()) {
+    const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
+    if (env && *env) choice_text = env, where = "GRAINS_OPENCL_DEVICE";
+  }
+  opencl::DeviceChoice choice;
   std::string problem;
+  if (!choice_text.empty() && !opencl::parse_device_choice(choice_text, &choice, &problem)) {
+    spdlog::error("grains devices: {}: {}", where, problem);
+    return kBadInput;
+  }
   const std::vector<opencl::Platform> list = opencl::platforms(&problem);
   if (list.empty()) {
     spdlog::error("grains devices: {}", problem);
     return kBadInput;
   }
+  if (!choice_text.empty()) {
+    if (std::string bad = opencl::choice_problem(list, choice); !bad.empty()) {
+      spdlog::error("grains devices: {}: {}", where, bad);
+      return kBadInput;
+    }
+  }
   int failed = 0;
   for (size_t p = 0; p < list.size(); ++p) {
+    if (!choice_text.empty() && p != choice.platform) continue;
     const opencl::Platform& pl = list[p];
     std::printf("platform %zu: %s (%s, %s)\n", p, pl.name.c_str(), pl.vendor.c_str(),
                 pl.version.c_str());
     if (pl.devices.empty()) std::printf("  no devices\n");
     for (size_t d = 0; d < pl.devices.size(); ++d) {
+      if (!choice_text.empty() && d != choice.device) continue;
       const opencl::Device& dv = pl.devices[d];
       std::printf("  device %zu: %s (%s, %u compute units, %.0f MiB, %s, %s)\n", d,
                   dv.name.c_str(), dv.type.c_str(), dv.compute_units,
@@ -523,6 +544,10 @@ int cli_main(int argc, char** argv) {
   auto* plot = viewer::add_plot_subcommand(app, plot_opts);
   auto* devices = app.add_subcommand(
       "devices", "list the OpenCL platforms and devices, and whether each builds the grains kernels");
+  std::string device_choice;
+  devices->add_option("--device", device_choice,
+                      "PLATFORM:DEVICE: build on this device only (default: the environment "
+                      "variable GRAINS_OPENCL_DEVICE, else every device)");
 
   if (const int rc = parse_command_line("grains", app, argc, argv); rc >= 0) return rc;
 
@@ -563,7 +588,7 @@ int cli_main(int argc, char** argv) {
       return 0;
     }
     if (heap->parsed()) return cmd_heap(heap_frame, heap_d, heap_cx, heap_cz);
-    if (devices->parsed()) return cmd_devices();
+    if (devices->parsed()) return cmd_devices(device_choice);
     if (render->parsed()) return viewer::render_command(render_opts);
     if (plot->parsed()) return viewer::plot_command(plot_opts);
     if (cook->parsed())

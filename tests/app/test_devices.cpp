@@ -41,3 +41,21 @@ TEST_CASE("grains devices without an OpenCL platform says so and exits 2", "[cli
   CHECK_THAT(out, Catch::Contains("grains devices: no OpenCL platform found"));
   CHECK_THAT(out, Catch::Contains("pocl-opencl-icd"));
 }
+
+TEST_CASE("grains devices builds on the one device chosen, and refuses a choice that names none",
+          "[cli][opencl][bad]") {
+  // --device P:D, else the environment variable GRAINS_OPENCL_DEVICE: 0:0 is PoCL's CPU
+  const std::string dir = test::temp_dir("devices_choice");
+  const std::string log = dir + "/log.txt";
+  REQUIRE(test::run_grains("devices --device 0:0", log) == 0);
+  CHECK_THAT(test::read_text(log), Catch::Contains("grains kernels: built in"));
+  CHECK(test::run_grains("devices --device 7:0", log) == 2);
+  CHECK_THAT(test::read_text(log), Catch::Contains("grains devices: --device: no device 7:0 (platform 0"));
+  CHECK(test::run_grains("devices --device gpu", log) == 2);
+  CHECK_THAT(test::read_text(log), Catch::Contains("'gpu' is not PLATFORM:DEVICE"));
+  setenv("GRAINS_OPENCL_DEVICE", "0:9", 1);
+  const int rc = test::run_grains("devices", log);
+  unsetenv("GRAINS_OPENCL_DEVICE");
+  CHECK(rc == 2);
+  CHECK_THAT(test::read_text(log), Catch::Contains("GRAINS_OPENCL_DEVICE: no device 0:9"));
+}

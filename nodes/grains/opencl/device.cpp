@@ -105,6 +105,36 @@ std::vector<Platform> platforms(std::string* problem) {
   return out;
 }
 
+bool parse_device_choice(const std::string& text, DeviceChoice* out, std::string* problem) {
+  const size_t colon = text.find(':');
+  auto number = [](const std::string& t, size_t* v) {
+    if (t.empty() || t.size() > 6) return false;
+    for (char c : t)
+      if (c < '0' || c > '9') return false;
+    *v = static_cast<size_t>(std::stoul(t));
+    return true;
+  };
+  if (colon == std::string::npos || !number(text.substr(0, colon), &out->platform) ||
+      !number(text.substr(colon + 1), &out->device)) {
+    *problem = "'" + text + "' is not PLATFORM:DEVICE (two numbers from grains devices, e.g. 0:0)";
+    return false;
+  }
+  return true;
+}
+
+std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice& choice) {
+  if (choice.platform < list.size() && choice.device < list[choice.platform].devices.size())
+    return "";
+  std::string there;
+  for (size_t p = 0; p < list.size(); ++p) {
+    if (!there.empty()) there += "; ";
+    there += "platform " + std::to_string(p) + " (" + list[p].name + ") has " +
+             std::to_string(list[p].devices.size()) + " device(s)";
+  }
+  return "no device " + std::to_string(choice.platform) + ":" + std::to_string(choice.device) +
+         " (" + there + ")";
+}
+
 BuildResult build_kernels(size_t platform, size_t device) {
   BuildResult r;
   cl_int status = CL_SUCCESS;

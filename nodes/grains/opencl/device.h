@@ -26,6 +26,15 @@ struct Platform {
 // sets *problem to why (no loader configuration, no driver installed).
 std::vector<Platform> platforms(std::string* problem);
 
+// A device by its place in platforms(): "P:D", platform P's device D.
+struct DeviceChoice {
+  size_t platform = 0, device = 0;
+};
+// Parses "P:D" (two non-negative integers); "" and *problem set when it is not one.
+bool parse_device_choice(const std::string& text, DeviceChoice* out, std::string* problem);
+// "" when `choice` names a device of `list`, else why not, naming what there is.
+std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice& choice);
+
 struct BuildResult {
   bool ok = false;
   double seconds = 0;  // wall time of the build

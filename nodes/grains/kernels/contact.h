@@ -119,7 +119,7 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
   for (k = b; k < e; k += GR_LANES) {
     /* the block stores its overlaps where they go, as one vector (a copy after it had been
      * 8 scalar moves) */
-#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+#ifdef GR_OPENCL
     /* OpenCL C 1.2 has no generic address space: the block writes private lanes, copied out */
     float* out = ld;
 #else
@@ -129,7 +129,7 @@ GR_HOT int gr_gather_contacts_lanes(const gr_grains* g, const GR_GLOBAL float* p
       gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, out, uniform, 0);
     else
       gr_contact_block(g, p, i, px, py, pz, ri, wi, repulse, k, e, lx, ly, lz, lc, out, uniform, 1);
-#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+#ifdef GR_OPENCL
     if (overlap_out)
       for (l = 0; l < GR_LANES; ++l) overlap_out[k - b + (gr_uint)l] = ld[l];
 #endif

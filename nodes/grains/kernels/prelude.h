@@ -9,6 +9,7 @@
 
 #if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
 
+#define GR_OPENCL 1 /* compiled as OpenCL C (nodes/grains/opencl/grains.cl) */
 #define GR_GLOBAL __global
 #define GR_INLINE static inline
 #define GR_HOT static inline
@@ -78,7 +79,7 @@ GR_INLINE gr_uint gr_as_uint(float f) { return __builtin_bit_cast(gr_uint, f); }
 #endif
 
 /* the positions of 8 grains j[0..7] of (n x 3) array a into x, y, z (gr_gather_contacts_lanes) */
-#if !(defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)) && defined(__AVX2__) && \
+#if !defined(GR_OPENCL) && defined(__AVX2__) && \
     defined(__FMA__) && !defined(GR_PORTABLE_LOADS) /* (a test compares the two) */
 #include <immintrin.h>
 /* AVX2: one 4-float load per grain (reads a[3 j + 3]: a holds 3 n + 1 floats) and a transpose,

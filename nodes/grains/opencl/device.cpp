@@ -13,22 +13,22 @@
 namespace grains::opencl {
 namespace {
 
-std::string platform_text(cl_platform_id p, cl_platform_info what) {
+// A text property of a platform or device through OpenCL's two-call getters (the size, then
+// the text), without its terminating zeros; "" when the driver has none.
+template <class Object, class Info>
+std::string info_text(cl_int (*get)(Object, Info, size_t, void*, size_t*), Object o, Info what) {
   size_t n = 0;
-  if (clGetPlatformInfo(p, what, 0, nullptr, &n) != CL_SUCCESS || n == 0) return "";
+  if (get(o, what, 0, nullptr, &n) != CL_SUCCESS || n == 0) return "";
   std::string s(n, '\0');
-  clGetPlatformInfo(p, what, n, s.data(), nullptr);
+  get(o, what, n, s.data(), nullptr);
   while (!s.empty() && s.back() == '\0') s.pop_back();
   return s;
 }
-
+std::string platform_text(cl_platform_id p, cl_platform_info what) {
+  return info_text(clGetPlatformInfo, p, what);
+}
 std::string device_text(cl_device_id d, cl_device_info what) {
-  size_t n = 0;
-  if (clGetDeviceInfo(d, what, 0, nullptr, &n) != CL_SUCCESS || n == 0) return "";
-  std::string s(n, '\0');
-  clGetDeviceInfo(d, what, n, s.data(), nullptr);
-  while (!s.empty() && s.back() == '\0') s.pop_back();
-  return s;
+  return info_text(clGetDeviceInfo, d, what);
 }
 
 std::vector<cl_platform_id> platform_ids(cl_int* status) {

@@ -34,6 +34,23 @@ void add_block(Scene& sc, float r, float y0) {
         sc.add({(i - 2) * 2 * r + 0.1f * r * j, y0 + j * 2 * r, (k - 2) * 2 * r - 0.1f * r * j}, r);
 }
 
+// Every grain of sc, all of radius r, started on side `side` (+1 above, -1 below) of a slab or
+// sheet in the plane y = 0: each must end on that side, at least r from the surface (less the
+// trace's tolerance, 1e-3 r).
+void check_kept_side(const Scene& sc, const ColliderState& c, float side, float r,
+                     const std::string& what) {
+  int crossed = 0;
+  float nearest = 1e30f;
+  for (size_t i = 0; i < sc.size(); ++i) {
+    if (sc.pos(i).y * side < 0) ++crossed;
+    nearest = std::min(nearest, c.distance(sc.pos(i), nullptr));
+  }
+  INFO(what << ", from " << (side > 0 ? "above" : "below"));
+  report((what + ": nearest / r").c_str(), nearest / r);
+  CHECK(crossed == 0);
+  CHECK(nearest > r * (1 - 1e-3f));
+}
+
 }  // namespace
 
 TEST_CASE("a block of grains settles on a mesh box as on the analytic box", "[mesh][colliders][grains]") {
@@ -97,16 +114,7 @@ TEST_CASE("no grain passes a closed mesh or a sheet at 10 m/s", "[mesh][collider
         sc.add(aim - dir * 0.3f, r, 1, dir * 10.0f);
       }
       sc.run(0.25f);
-      int crossed = 0;
-      float nearest = 1e30f;
-      for (size_t i = 0; i < sc.size(); ++i) {
-        if (sc.pos(i).y * side < 0) ++crossed;
-        nearest = std::min(nearest, c.distance(sc.pos(i), nullptr));
-      }
-      INFO(cs.name << ", from " << (side > 0 ? "above" : "below"));
-      report(cs.name, nearest / r);
-      CHECK(crossed == 0);
-      CHECK(nearest > r * (1 - 1e-3f));
+      check_kept_side(sc, c, side, r, cs.name);
     }
 }
 
@@ -157,20 +165,11 @@ TEST_CASE("a grain pressed through a sheet from within half its radius is put ba
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(-1, 1);
     for (int k = 0; k < 40; ++k) {
-      // 0.1 r to 0.45 r from the sheet, well apart from each other
+      // 0.1 r to 0.45 r from the sheet
       const Vec3 p{0.8f * u(rng), side * r * (0.275f + 0.175f * u(rng)), 0.8f * u(rng)};
       sc.add(p, r, 1, Vec3{u(rng), -side * 10.0f, u(rng)});
     }
     sc.run(0.1f);
-    int crossed = 0;
-    float nearest = 1e30f;
-    for (size_t i = 0; i < sc.size(); ++i) {
-      if (sc.pos(i).y * side < 0) ++crossed;
-      nearest = std::min(nearest, c.distance(sc.pos(i), nullptr));
-    }
-    INFO("from " << (side > 0 ? "above" : "below"));
-    report("sheet, started within r/2: nearest / r", nearest / r);
-    CHECK(crossed == 0);
-    CHECK(nearest > r * (1 - 1e-3f));
+    check_kept_side(sc, c, side, r, "sheet, started within r/2");
   }
 }

@@ -190,6 +190,7 @@ struct RunRequest {
   bool max_points_given = false;
   int checkpoint_every = 0;  // frames between checkpoints (0: none)
   std::string resume;        // the folder of a run to continue
+  bool opencl = false;       // --opencl: every grains node with use_opencl (may change on resume)
 };
 
 // A run to resume: the checkpoint of its folder, checked against what the command line adds
@@ -231,7 +232,9 @@ int cmd_run(RunRequest req) {
   if (!req.resume.empty()) resume.emplace(resumed_run(req));
   if (!req.graph_given && req.resume.empty())
     throw LoadError("grains run", "", "a graph is required: name a graph file, or --resume DIR");
-  Graph g = load_graph(req.graph, parse_overrides(req.sets));
+  std::vector<Override> overrides = parse_overrides(req.sets);
+  if (req.opencl) overrides.push_back(Override{"", "use_opencl", "true", "grains"});
+  Graph g = load_graph(req.graph, overrides);
   if (req.frames > 0) g.frames = req.frames;
   spdlog::debug("graph {}: {} nodes, {} solvers, {} frames at {:g} fps", req.graph, g.nodes.size(),
                 g.solvers.size(), g.frames, g.fps);
@@ -488,7 +491,8 @@ int cli_main(int argc, char** argv) {
       ->check(positive_number());
   run->add_option("--threads", threads, "worker threads (default: all cores)")
       ->check(CLI::Range(1, kMaxThreads));
-  run->add_flag("--opencl", opencl, "run grains nodes on OpenCL (not available in this build)");
+  run->add_flag("--opencl", opencl,
+                "run every grains node with use_opencl on (GRAINS_OPENCL_DEVICE=P:D picks the device)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
   add_verbosity_flags(run, quiet, verbose);
   auto* max_points_opt = run->add_option("--max-points", max_points,
@@ -555,12 +559,7 @@ int cli_main(int argc, char** argv) {
   set_log_level(quiet, verbose);
   return report_errors("grains", [&]() -> int {
     if (run->parsed()) {
-      if (opencl) {
-        spdlog::error(
-            "grains: --opencl: this build has no OpenCL path yet (the substep runs on the CPU; "
-            "`grains devices` lists the OpenCL devices and checks that they build the kernels)");
-        return kBadInput;
-      }
+      req.opencl = opencl;
       req.graph = graph_path;
       req.graph_given = graph_opt->count() > 0;
       req.out = out;

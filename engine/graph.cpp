@@ -250,8 +250,10 @@ struct Loader {
     // overrides apply to the authored JSON, so they are validated like everything else
     for (const auto& o : overrides) {
       bool found = false;
+      if (!o.type.empty()) found = true;
       for (auto& n : nodes)
-        if (n.is_object() && n.contains("name") && n["name"] == o.node) {
+        if (n.is_object() && (o.type.empty() ? n.contains("name") && n["name"] == o.node
+                                             : n.contains("type") && n["type"] == o.type)) {
           json v;
           try {
             v = json::parse(o.value);

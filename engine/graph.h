@@ -62,6 +62,8 @@ struct Graph {
 // One `--set NODE.PARAM=VALUE`; VALUE is JSON when it parses as JSON, else a string.
 struct Override {
   std::string node, param, value;
+  // instead of a node's name: every node of this type (`grains run --opencl`); none is no error
+  std::string type = "";
 };
 // Parses "NODE.PARAM=VALUE"; throws LoadError (pointer "--set") when malformed.
 Override parse_override(const std::string& text);

@@ -37,6 +37,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
 
 #include "engine/buffer.h"
 #include "nodes/grains/kernels/distance.h"
@@ -44,6 +45,7 @@
 static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slots = planes");
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
+#include "nodes/grains/opencl/iterations.h"
 
 namespace grains {
 namespace {
@@ -589,6 +591,24 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   }
 }
 
+GrainsSolver::DeviceSlot::DeviceSlot() = default;
+GrainsSolver::DeviceSlot::~DeviceSlot() = default;
+GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot&) {}
+GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&) {
+  device.reset();
+  return *this;
+}
+GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;
+GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noexcept = default;
+
+std::string GrainsSolver::opencl_unsupported(const GrainsSettings& s) {
+  if (s.chebyshev_rho > 0) return "chebyshev_rho (Chebyshev acceleration)";
+  if (s.enable_rigid_shape_matching) return "enable_rigid_shape_matching";
+  if (s.update_collisions_during_iterations) return "update_collisions_during_iterations";
+  if (s.update_neighbors_during_iterations) return "update_neighbors_during_iterations";
+  return "";
+}
+
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
@@ -1008,7 +1028,20 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
-  for (int it = 0; it < iterations; ++it) {
+  if (s.use_opencl) {
+    if (std::string what = opencl_unsupported(s); !what.empty())
+      throw std::runtime_error("grains: use_opencl: " + what +
+                               " does not run on an OpenCL device yet: turn one of them off");
+    if (!device_.device) device_.device = std::make_unique<opencl::Iterations>();
+    opencl::IterationSizes size;
+    size.n = n;
+    size.pair_entries = g.nbr_offsets ? neighbors_.indices.size() : 0;
+    size.plane_entries = g.plane_offsets ? plane_offsets_[n] : 0;
+    size.prims = g.con_offsets ? d.prim_count : 0;
+    size.row_length = row_length_;
+    device_.device->run(g, prm, size, p_.data(), acc, iterations, friction_pass, s.accurate_friction);
+  }
+  for (int it = 0; it < iterations && !s.use_opencl; ++it) {
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations) planes(false);
     const float* p = p_.data();
@@ -1036,7 +1069,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     if (friction_pass && s.accurate_friction) run_friction();
     if (g.targetP) project_pins();  // once an iteration, last
   }
-  if (friction_pass && !s.accurate_friction) run_friction();
+  if (friction_pass && !s.accurate_friction && !s.use_opencl) run_friction();
 
   // 4. velocity, drift, final collisions; write P and v
   {

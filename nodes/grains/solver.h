@@ -8,6 +8,7 @@
 // common subset of C++ and OpenCL C, so an OpenCL path compiles the same source.
 #pragma once
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,10 @@
 #include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
 
 namespace grains {
+
+namespace opencl {
+class Iterations;
+}
 
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
 // mass_shock_method's choices, in its menu's order (kernels/param_table.h)
@@ -118,6 +123,9 @@ struct GrainsStats {
 class GrainsSolver {
  public:
   static constexpr int kContactSlots = 4;  // = GR_MAX_PLANES (checked in solver.cpp)
+  // What use_opencl cannot run yet, as the parameter that asks for it ("" when nothing): the
+  // loader refuses such a graph, and substep() throws for one that reaches it.
+  static std::string opencl_unsupported(const GrainsSettings& s);
   void substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                size_t collider_count, GrainsStats* stats = nullptr);
   // What one substep leaves for the next, at a frame's end (Node::save_state): the neighbour
@@ -155,6 +163,18 @@ class GrainsSolver {
   void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
                      int threads);
 
+  // the iterations on an OpenCL device (use_opencl), opened at the first substep that asks; a
+  // copy of the solver opens its own
+  struct DeviceSlot {
+    std::unique_ptr<opencl::Iterations> device;
+    DeviceSlot();
+    ~DeviceSlot();
+    DeviceSlot(const DeviceSlot&);
+    DeviceSlot& operator=(const DeviceSlot&);
+    DeviceSlot(DeviceSlot&&) noexcept;
+    DeviceSlot& operator=(DeviceSlot&&) noexcept;
+  };
+  DeviceSlot device_;
   NeighborSearch search_;
   NeighborList neighbors_;
   // the rows' build: valid, for these grains (ids) and radii, from these predicted positions,

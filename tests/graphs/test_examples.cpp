@@ -96,8 +96,8 @@ TEST_CASE("default graph: the poured grains stand as a heap at 30 degrees and st
   CHECK_NOFAIL(std::fabs(later.angle_deg - settled.angle_deg) < 1.0);
 }
 
-TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads flat without",
-          "[graphs]") {
+// sand_pile's pour with friction and without; use_opencl on its grains node when `opencl`.
+static void check_sand_pile(bool opencl) {
   // The example runs 3 substeps x 20 iterations: too few to stack a pile at its angle of repose
   // (the help page's stacking note; VALIDATION.md measures repose angles at 8 x 40), but with
   // friction the grains still stack: the pile stands several layers deep and is highest at its
@@ -110,11 +110,12 @@ TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads
   struct Pile {
     double inner = 0, outer = 0, reach90 = 0;
   };
-  auto pour = [](const std::string& friction) {
+  auto pour = [&](const std::string& friction) {
     register_builtin_nodes();
     Graph g = load_graph(test::source_dir() + "/graphs/sand_pile.json",
                          {parse_override("grains.friction_with_particles=" + friction),
-                          parse_override("grains.friction_with_colliders=" + friction)});
+                          parse_override("grains.friction_with_colliders=" + friction),
+                          parse_override(std::string("grains.use_opencl=") + (opencl ? "true" : "false"))});
     Simulation sim(g);
     Pile pile;
     int ni = 0, no = 0;
@@ -154,6 +155,17 @@ TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads
   // 5% is a dome
   CHECK(rough.inner > 1.05 * rough.outer);
   CHECK(smooth.reach90 > 3 * rough.reach90);
+}
+
+TEST_CASE("sand_pile: a poured pile stacks into a dome with friction and spreads flat without",
+          "[graphs]") {
+  check_sand_pile(false);
+}
+
+TEST_CASE("use_opencl: sand_pile on the OpenCL device stacks a dome with friction and spreads without",
+          "[graphs][opencl]") {
+  // the iterations and friction passes on PoCL's CPU device: the same bounds
+  check_sand_pile(true);
 }
 
 TEST_CASE("hourglass: grains leave only through the orifice", "[graphs]") {

@@ -1,13 +1,12 @@
 #include "nodes/grains/opencl/device.h"
 
-#define CL_TARGET_OPENCL_VERSION 120
-#include <CL/cl.h>
-
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
 
+#include "nodes/grains/opencl/cl_program.h"
 #include "nodes/grains/opencl/sources.h"
 
 namespace grains::opencl {
@@ -135,47 +134,81 @@ std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice
          " (" + there + ")";
 }
 
-BuildResult build_kernels(size_t platform, size_t device) {
-  BuildResult r;
+bool chosen_device(DeviceChoice* out, std::string* problem) {
+  *out = DeviceChoice{};
+  const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
+  const std::string text = env ? env : "";
+  if (!text.empty() && !parse_device_choice(text, out, problem)) {
+    *problem = "GRAINS_OPENCL_DEVICE: " + *problem;
+    return false;
+  }
+  const std::vector<Platform> list = platforms(problem);
+  if (list.empty()) return false;
+  if (std::string bad = choice_problem(list, *out); !bad.empty()) {
+    *problem = (text.empty() ? "" : "GRAINS_OPENCL_DEVICE: ") + bad;
+    return false;
+  }
+  return true;
+}
+
+cl_device_id device_id(size_t platform, size_t device, std::string* problem) {
   cl_int status = CL_SUCCESS;
   const std::vector<cl_platform_id> pids = platform_ids(&status);
   if (platform >= pids.size()) {
-    r.log = "no platform " + std::to_string(platform);
-    return r;
+    *problem = "no platform " + std::to_string(platform);
+    return nullptr;
   }
   const std::vector<cl_device_id> dids = device_ids(pids[platform]);
   if (device >= dids.size()) {
-    r.log = "no device " + std::to_string(device) + " on platform " + std::to_string(platform);
-    return r;
+    *problem = "no device " + std::to_string(device) + " on platform " + std::to_string(platform);
+    return nullptr;
   }
-  cl_device_id d = dids[device];
-  cl_context ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
-  if (!ctx) {
-    r.log = "clCreateContext failed (" + std::to_string(status) + ")";
-    return r;
-  }
+  return dids[device];
+}
+
+cl_program build_program(cl_context ctx, cl_device_id d, std::string* log) {
   const SourceFolder folder;
   std::string main_text;
   for (const SourceFile& f : kernel_sources())
     if (std::string(f.name) == "grains.cl") main_text = f.text;
   const char* text = main_text.c_str();
+  cl_int status = CL_SUCCESS;
   cl_program program = clCreateProgramWithSource(ctx, 1, &text, nullptr, &status);
-  const auto start = std::chrono::steady_clock::now();
-  if (program) {
-    // the folder is a plain name under the temporary directory: no quotes (PoCL passes them on)
-    const std::string options = "-cl-std=CL1.2 -I " + folder.path.string();
-    status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
-    r.ok = status == CL_SUCCESS;
-    size_t n = 0;
-    clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);
-    std::string log(n, '\0');
-    if (n > 0) clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, n, log.data(), nullptr);
-    while (!log.empty() && (log.back() == '\0' || log.back() == '\n')) log.pop_back();
-    r.log = r.ok ? log : "clBuildProgram failed (" + std::to_string(status) + "):\n" + log;
-    clReleaseProgram(program);
-  } else {
-    r.log = "clCreateProgramWithSource failed (" + std::to_string(status) + ")";
+  if (!program) {
+    *log = "clCreateProgramWithSource failed (" + std::to_string(status) + ")";
+    return nullptr;
   }
+  // the folder is a plain name under the temporary directory: no quotes (PoCL passes them on)
+  const std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt -I " + folder.path.string();
+  status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
+  size_t n = 0;
+  clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);
+  std::string text_log(n, '\0');
+  if (n > 0) clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, n, text_log.data(), nullptr);
+  while (!text_log.empty() && (text_log.back() == '\0' || text_log.back() == '\n')) text_log.pop_back();
+  if (status != CL_SUCCESS) {
+    *log = "clBuildProgram failed (" + std::to_string(status) + "):\n" + text_log;
+    clReleaseProgram(program);
+    return nullptr;
+  }
+  *log = text_log;
+  return program;
+}
+
+BuildResult build_kernels(size_t platform, size_t device) {
+  BuildResult r;
+  cl_device_id d = device_id(platform, device, &r.log);
+  if (!d) return r;
+  cl_int status = CL_SUCCESS;
+  cl_context ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
+  if (!ctx) {
+    r.log = "clCreateContext failed (" + std::to_string(status) + ")";
+    return r;
+  }
+  const auto start = std::chrono::steady_clock::now();
+  cl_program program = build_program(ctx, d, &r.log);
+  r.ok = program != nullptr;
+  if (program) clReleaseProgram(program);
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   clReleaseContext(ctx);
   return r;

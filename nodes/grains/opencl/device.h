@@ -1,6 +1,6 @@
-// OpenCL platforms and devices, and building the grains kernels on one: the first part of the
-// OpenCL backend. `grains devices` lists what the OpenCL loader finds and whether each device
-// builds the kernels (the substep does not run on a device yet: `grains run --opencl` says so).
+// OpenCL platforms and devices, and building the grains kernels on one. `grains devices` lists
+// what the OpenCL loader finds and whether each device builds the kernels; a grains node with
+// use_opencl runs on the device chosen_device() names (opencl/iterations.h).
 #pragma once
 #include <cstdint>
 #include <string>
@@ -34,6 +34,11 @@ struct DeviceChoice {
 bool parse_device_choice(const std::string& text, DeviceChoice* out, std::string* problem);
 // "" when `choice` names a device of `list`, else why not, naming what there is.
 std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice& choice);
+
+// The device a grains node with use_opencl runs on: GRAINS_OPENCL_DEVICE ("P:D") when set, else
+// the first platform's first device. Returns false with *problem set when there is no platform,
+// the variable is malformed or names no device.
+bool chosen_device(DeviceChoice* out, std::string* problem);
 
 struct BuildResult {
   bool ok = false;

@@ -1,9 +1,8 @@
 /* The grains kernels as one OpenCL C 1.2 program: every shared header (nodes/grains/kernels/,
- * the same code the CPU path compiles) and, so far, one kernel that calls the per-grain steps of
- * a substep (predict, the iteration, pre-stabilization, the friction pass, the velocity update).
- * `grains devices` builds this program on each device it lists, and the ctest
- * opencl_kernels_compile compiles it to SPIR with clang, so that code generation, not only
- * parsing, sees the code the CPU path runs. The substep does not run on a device yet. */
+ * the same code the CPU path compiles) and the kernels of the substep's stages that run on a
+ * device (opencl/iterations.cpp launches them; GrainsSolver::substep runs the rest). `grains
+ * devices` builds this program on each device it lists, and the ctest opencl_kernels_compile
+ * compiles it to SPIR with clang, so that code generation, not only parsing, sees it. */
 #include "clumping.h"
 #include "collider.h"
 #include "contact.h"
@@ -14,18 +13,117 @@
 #include "pin.h"
 #include "velocity.h"
 
-__kernel void gr_probe_substep(gr_params prm, __global const float* P, __global const float* v,
-                               __global float* p, __global float* out) {
-  const int i = (int)get_global_id(0);
+/* The per-grain arrays of gr_grains as kernel arguments (a kernel argument cannot hold pointers
+ * in OpenCL C 1.2), in the order opencl/iterations.cpp sets them; a missing one is null, as on
+ * the CPU. */
+#define GR_GRAINS_ARGS                                                                        \
+  __global const float *P, __global const float *radius, __global const float *inv_mass,     \
+      __global const float *mass, __global const float *friction,                             \
+      __global const float *repulsionweight, __global const float *repulsionstiffness,        \
+      __global const float *attractionweight, __global const float *attractionstiffness,      \
+      __global const gr_uint *nbr_offsets, __global const gr_uint *nbr_indices,               \
+      __global const float *pair_slip, __global const gr_uint *plane_offsets,                 \
+      __global const float *plane, __global const float *plane_slip,                          \
+      __global const gr_uint *con_offsets, __global const gr_uint *con_other,                 \
+      __global const gr_uint *con_prim, __global const float *restlength,                     \
+      __global const float *constraintweight, __global const float *constraintstiffness,      \
+      float uniform_radius, float uniform_inv_mass, int nbr_unconstrained
+
+GR_INLINE gr_grains gr_device_grains(
+    __global const float* P, __global const float* radius, __global const float* inv_mass,
+    __global const float* mass, __global const float* friction,
+    __global const float* repulsionweight, __global const float* repulsionstiffness,
+    __global const float* attractionweight, __global const float* attractionstiffness,
+    __global const gr_uint* nbr_offsets, __global const gr_uint* nbr_indices,
+    __global const float* pair_slip, __global const gr_uint* plane_offsets,
+    __global const float* plane, __global const float* plane_slip,
+    __global const gr_uint* con_offsets, __global const gr_uint* con_other,
+    __global const gr_uint* con_prim, __global const float* restlength,
+    __global const float* constraintweight, __global const float* constraintstiffness,
+    float uniform_radius, float uniform_inv_mass, int nbr_unconstrained) {
   gr_grains g = {0};
   g.P = P;
-  g.v = v;
-  gr_normal_sums acc = {0};
-  gr_predict(&g, &prm, p, i);
-  gr_float3 y = gr_iterate(&g, &prm, p, i, &acc);
-  y = gr_add(y, gr_stabilize(&g, &prm, p, i));
-  y = gr_add(y, gr_friction_pass(&g, &prm, p, &acc, i));
-  gr_float3 Pk, vk;
-  gr_update_velocity(&g, &prm, p, i, &Pk, &vk);
-  gr_store3(out, i, gr_add(y, gr_add(Pk, vk)));
+  g.radius = radius;
+  g.inv_mass = inv_mass;
+  g.mass = mass;
+  g.friction = friction;
+  g.repulsionweight = repulsionweight;
+  g.repulsionstiffness = repulsionstiffness;
+  g.attractionweight = attractionweight;
+  g.attractionstiffness = attractionstiffness;
+  g.nbr_offsets = nbr_offsets;
+  g.nbr_indices = nbr_indices;
+  g.pair_slip = pair_slip;
+  g.plane_offsets = plane_offsets;
+  g.plane = plane;
+  g.plane_slip = plane_slip;
+  g.con_offsets = con_offsets;
+  g.con_other = con_other;
+  g.con_prim = con_prim;
+  g.restlength = restlength;
+  g.constraintweight = constraintweight;
+  g.constraintstiffness = constraintstiffness;
+  g.uniform_radius = uniform_radius;
+  g.uniform_inv_mass = uniform_inv_mass;
+  g.nbr_unconstrained = nbr_unconstrained;
+  return g;
+}
+
+#define GR_GRAINS_NAMES                                                                       \
+  P, radius, inv_mass, mass, friction, repulsionweight, repulsionstiffness, attractionweight, \
+      attractionstiffness, nbr_offsets, nbr_indices, pair_slip, plane_offsets, plane,         \
+      plane_slip, con_offsets, con_other, con_prim, restlength, constraintweight,             \
+      constraintstiffness, uniform_radius, uniform_inv_mass, nbr_unconstrained
+
+/* The sums the iterations keep for the friction pass and the impact data (gr_normal_sums);
+ * `scratch` holds each grain's row of this iteration's overlaps, row_length floats a grain (the
+ * CPU keeps one such row a thread). */
+GR_INLINE gr_normal_sums gr_device_sums(__global float* scratch, gr_uint row_length, int i,
+                                        __global gr_uint* pair_sum, __global float* collider_sum,
+                                        __global float* collider_dx, __global float* friction_dx) {
+  gr_normal_sums acc;
+  acc.pair_iteration = scratch ? scratch + (size_t)row_length * (size_t)i : 0;
+  acc.pair = pair_sum;
+  acc.collider = collider_sum;
+  acc.collider_dx = collider_dx;
+  acc.friction_dx = friction_dx;
+  return acc;
+}
+
+/* one Jacobi iteration: next = gr_iterate(p), grain by grain (DESIGN §4 step 3) */
+__kernel void gr_k_iterate(gr_params prm, GR_GRAINS_ARGS, __global const float* p,
+                           __global float* next, __global float* scratch, gr_uint row_length,
+                           __global gr_uint* pair_sum, __global float* collider_sum,
+                           __global float* collider_dx, __global float* friction_dx, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+  const gr_normal_sums acc =
+      gr_device_sums(scratch, row_length, i, pair_sum, collider_sum, collider_dx, friction_dx);
+  gr_store3(next, i, gr_iterate(&g, &prm, p, i, &acc));
+}
+
+/* the friction pass: next = gr_friction_pass(p) */
+__kernel void gr_k_friction(gr_params prm, GR_GRAINS_ARGS, __global const float* p,
+                            __global float* next, __global gr_uint* pair_sum,
+                            __global float* collider_sum, __global float* collider_dx,
+                            __global float* friction_dx, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+  const gr_normal_sums acc = gr_device_sums(0, 0, i, pair_sum, collider_sum, collider_dx, friction_dx);
+  gr_store3(next, i, gr_friction_pass(&g, &prm, p, &acc, i));
+}
+
+/* pins, once an iteration and last (kernels/pin.h): each grain moves only itself, in place */
+__kernel void gr_k_pin(gr_params prm, __global const float* targetP,
+                       __global const float* targetweight, __global const float* targetstiffness,
+                       __global float* p, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  gr_grains g = {0};
+  g.targetP = targetP;
+  g.targetweight = targetweight;
+  g.targetstiffness = targetstiffness;
+  gr_store3(p, i, gr_project_pin(&g, &prm, p, i));
 }

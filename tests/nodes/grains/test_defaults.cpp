@@ -48,10 +48,8 @@ size_t add_grain(ParticleStore& s, const Vec3& P, float r, float m) {
   return i;
 }
 
-}  // namespace
-
-TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
-          "[grains][defaults]") {
+// Columns of 50 and 100 grains at the defaults (grains_params adds to the material).
+void check_stacks(json grains_params) {
   // A column of N touching 1 cm grains on the ground, released at rest, at the node and solver
   // defaults (10 iterations, error control). Rigid contacts carry the column's weight with
   // overlaps the error control keeps under its tolerance, 0.25% of d on average: the column's
@@ -64,8 +62,8 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
     const float r = 0.005f, d = 2 * r;
     ParticleStore pts;
     for (int k = 0; k < n; ++k) add_grain(pts, {0, r + d * k, 0}, r, 1.3e-3f);
-    Simulation sim(
-        defaults_graph({{"particle_separation", d}}, json::object(), json::array({kGround})));
+    grains_params["particle_separation"] = d;
+    Simulation sim(defaults_graph(grains_params, json::object(), json::array({kGround})));
     sim.set_points(0, std::move(pts));
     for (int f = 0; f < 48; ++f) sim.step_frame();
     const ParticleStore& s = sim.object(0).pts;
@@ -84,6 +82,19 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
     CHECK(top <= H + 1e-4f * H);
     CHECK(energy / n < 1e-6);
   }
+}
+
+}  // namespace
+
+TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
+          "[grains][defaults]") {
+  check_stacks(json::object());
+}
+
+TEST_CASE("use_opencl: stacks of 50 and 100 grains stand within 1% of N d on the OpenCL device",
+          "[grains][defaults][opencl]") {
+  // the iterations and friction passes on PoCL's CPU device, the same bounds
+  check_stacks({{"use_opencl", true}});
 }
 
 TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb friction",

@@ -58,6 +58,25 @@ TEST_CASE("a pinned grain sags by q/(1-q) g dt^2 under gravity", "[grains][pins]
   CHECK(off.pos(0).y < 1.0f - 0.5f * kG * 0.25f * 0.9f);
 }
 
+TEST_CASE("use_opencl: a pinned grain sags by q/(1-q) g dt^2 on the OpenCL device",
+          "[grains][pins][opencl]") {
+  // the case above with the iterations and the pins on PoCL's CPU device: the same steady sag
+  // within the same 1%
+  Scene sc;
+  sc.s = settings(24, 4, 10);
+  sc.s.target_stiffness = 4;
+  sc.s.use_opencl = true;
+  sc.add({0, 1, 0}, 0.05f);
+  sc.targetP.resize(3, 0.0f);
+  sc.targetP[1] = 1.0f;
+  sc.targetstiffness.resize(1, 1.0f);
+  sc.run(2.0f);
+  double e = 1.0 - sc.pos(0).y;
+  double expected = pin_lag(4, 4, 10, kG, sc.s.dt);
+  report("pinned grain sag on the device / (q/(1-q) g dt^2)", e / expected);
+  CHECK(std::fabs(e - expected) < 0.01 * expected);
+}
+
 TEST_CASE("no targetstiffness attribute means no pin", "[grains][pins]") {
   // help page: "If no targetstiffness point attribute is present, it is treated as zero". A
   // grain with targetP at its start and no targetstiffness falls freely: after 1 s at 24 fps x 2

@@ -1,0 +1,255 @@
+#include "nodes/grains/opencl/iterations.h"
+
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "nodes/grains/opencl/cl_program.h"
+#include "nodes/grains/opencl/device.h"
+
+namespace grains::opencl {
+namespace {
+
+// the kernels take gr_params by value: plain 4-byte fields, the same layout on both sides
+static_assert(sizeof(gr_params) % 4 == 0, "gr_params holds 4-byte fields only");
+
+void check(cl_int status, const char* what) {
+  if (status != CL_SUCCESS)
+    throw std::runtime_error(std::string("OpenCL: ") + what + " failed (" + std::to_string(status) + ")");
+}
+
+// A device buffer grown on demand (never shrunk: the grains' counts vary from substep to substep).
+struct Buffer {
+  cl_mem mem = nullptr;
+  size_t capacity = 0;
+  void reserve(cl_context ctx, size_t bytes) {
+    bytes = std::max<size_t>(bytes, 4);
+    if (bytes <= capacity) return;
+    release();
+    cl_int status = CL_SUCCESS;
+    mem = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, nullptr, &status);
+    check(status, "clCreateBuffer");
+    capacity = bytes;
+  }
+  void release() {
+    if (mem) clReleaseMemObject(mem);
+    mem = nullptr;
+    capacity = 0;
+  }
+};
+
+// the per-grain arrays of gr_grains, in the kernels' argument order (GR_GRAINS_ARGS)
+enum Array {
+  kP, kRadius, kInvMass, kMass, kFriction, kRepulsionWeight, kRepulsionStiffness,
+  kAttractionWeight, kAttractionStiffness, kNbrOffsets, kNbrIndices, kPairSlip, kPlaneOffsets,
+  kPlane, kPlaneSlip, kConOffsets, kConOther, kConPrim, kRestLength, kConstraintWeight,
+  kConstraintStiffness, kArrays
+};
+constexpr cl_uint kScalars = 3;                 // uniform_radius, uniform_inv_mass, nbr_unconstrained
+constexpr size_t kGroup = 64;                  // work-items a work-group
+constexpr cl_uint kFirstOwn = 1 + kArrays + kScalars;  // after prm, the arrays and the scalars
+
+}  // namespace
+
+struct Iterations::Impl {
+  std::string name;
+  cl_context ctx = nullptr;
+  cl_command_queue queue = nullptr;
+  cl_program program = nullptr;
+  cl_kernel iterate = nullptr, friction = nullptr, pin = nullptr;
+  Buffer arrays[kArrays];
+  Buffer p, next, scratch, pair_sum, collider_sum, collider_dx, friction_dx;
+  Buffer target, target_weight, target_stiffness;  // pins
+
+  ~Impl() {
+    for (Buffer& b : arrays) b.release();
+    for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
+                      &target, &target_weight, &target_stiffness})
+      b->release();
+    for (cl_kernel k : {iterate, friction, pin})
+      if (k) clReleaseKernel(k);
+    if (program) clReleaseProgram(program);
+    if (queue) clReleaseCommandQueue(queue);
+    if (ctx) clReleaseContext(ctx);
+  }
+
+  // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
+  void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
+    if (!host) return;
+    b.reserve(ctx, std::max(bytes, device_bytes));
+    if (bytes > 0) check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
+                         "clEnqueueWriteBuffer");
+  }
+  void download(Buffer& b, void* host, size_t bytes) {
+    if (!host || bytes == 0) return;
+    check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, 0, bytes, host, 0, nullptr, nullptr),
+          "clEnqueueReadBuffer");
+  }
+};
+
+namespace {
+
+// a buffer argument, or null for a missing array (OpenCL 1.2: a null arg_value is a null pointer)
+void set_buffer(cl_kernel k, cl_uint index, const Buffer* b) {
+  cl_mem m = b ? b->mem : nullptr;
+  check(clSetKernelArg(k, index, sizeof(cl_mem), b ? &m : nullptr), "clSetKernelArg");
+}
+
+}  // namespace
+
+Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
+  DeviceChoice choice;
+  std::string problem;
+  if (!chosen_device(&choice, &problem)) throw std::runtime_error("use_opencl: " + problem);
+  cl_device_id d = device_id(choice.platform, choice.device, &problem);
+  if (!d) throw std::runtime_error("use_opencl: " + problem);
+  {
+    const std::vector<Platform> list = platforms(&problem);
+    impl_->name = list[choice.platform].devices[choice.device].name + " (platform " +
+                  std::to_string(choice.platform) + ", " + list[choice.platform].name + ")";
+  }
+  cl_int status = CL_SUCCESS;
+  impl_->ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
+  check(status, "clCreateContext");
+  impl_->queue = clCreateCommandQueue(impl_->ctx, d, 0, &status);
+  check(status, "clCreateCommandQueue");
+  std::string log;
+  impl_->program = build_program(impl_->ctx, d, &log);
+  if (!impl_->program)
+    throw std::runtime_error("use_opencl: the grains kernels do not build on " + impl_->name + ": " + log);
+  impl_->iterate = clCreateKernel(impl_->program, "gr_k_iterate", &status);
+  check(status, "clCreateKernel(gr_k_iterate)");
+  impl_->friction = clCreateKernel(impl_->program, "gr_k_friction", &status);
+  check(status, "clCreateKernel(gr_k_friction)");
+  impl_->pin = clCreateKernel(impl_->program, "gr_k_pin", &status);
+  check(status, "clCreateKernel(gr_k_pin)");
+}
+
+Iterations::~Iterations() = default;
+
+const std::string& Iterations::device_name() const { return impl_->name; }
+
+void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
+                     const gr_normal_sums& acc, int iterations, bool friction_pass,
+                     bool accurate_friction) {
+  Impl& m = *impl_;
+  const size_t n = size.n;
+  if (n == 0) return;
+  const size_t f = sizeof(float), u = sizeof(gr_uint);
+  // the inputs, once a substep
+  const struct {
+    Array slot;
+    const void* host;
+    size_t bytes;
+  } inputs[] = {
+      {kP, g.P, 3 * n * f},
+      {kRadius, g.radius, n * f},
+      {kInvMass, g.inv_mass, n * f},
+      {kMass, g.mass, n * f},
+      {kFriction, g.friction, n * f},
+      {kRepulsionWeight, g.repulsionweight, n * f},
+      {kRepulsionStiffness, g.repulsionstiffness, n * f},
+      {kAttractionWeight, g.attractionweight, n * f},
+      {kAttractionStiffness, g.attractionstiffness, n * f},
+      {kNbrOffsets, g.nbr_offsets, (n + 1) * u},
+      {kNbrIndices, g.nbr_indices, size.pair_entries * u},
+      {kPairSlip, g.pair_slip, 3 * size.pair_entries * f},
+      {kPlaneOffsets, g.plane_offsets, (n + 1) * u},
+      {kPlane, g.plane, 9 * size.plane_entries * f},
+      {kPlaneSlip, g.plane_slip, 3 * size.plane_entries * f},
+      {kConOffsets, g.con_offsets, (n + 1) * u},
+      {kConOther, g.con_other, 2 * size.prims * u},
+      {kConPrim, g.con_prim, 2 * size.prims * u},
+      {kRestLength, g.restlength, size.prims * f},
+      {kConstraintWeight, g.constraintweight, n * f},
+      {kConstraintStiffness, g.constraintstiffness, n * f},
+  };
+  for (const auto& in : inputs)
+    // positions: one float past the last grain, as the contact loop's block loads read
+    m.upload(m.arrays[in.slot], in.host, in.bytes, in.slot == kP ? in.bytes + f : 0);
+  m.upload(m.p, p, (3 * n + 1) * f);
+  m.next.reserve(m.ctx, (3 * n + 1) * f);
+  const bool pairs = acc.pair && g.nbr_offsets;
+  if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f);
+  m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
+  m.upload(m.collider_sum, acc.collider, size.plane_entries * f);
+  m.upload(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
+  m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
+
+  for (cl_kernel k : {m.iterate, m.friction}) {
+    check(clSetKernelArg(k, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
+    for (int a = 0; a < kArrays; ++a) {
+      const Array slot = static_cast<Array>(a);
+      const void* host = nullptr;
+      for (const auto& in : inputs)
+        if (in.slot == slot) host = in.host;
+      set_buffer(k, 1 + a, host ? &m.arrays[a] : nullptr);
+    }
+    const float ur = g.uniform_radius, uw = g.uniform_inv_mass;
+    const int unconstrained = g.nbr_unconstrained;
+    check(clSetKernelArg(k, 1 + kArrays, sizeof(float), &ur), "clSetKernelArg");
+    check(clSetKernelArg(k, 2 + kArrays, sizeof(float), &uw), "clSetKernelArg");
+    check(clSetKernelArg(k, 3 + kArrays, sizeof(int), &unconstrained), "clSetKernelArg");
+  }
+  const int count = static_cast<int>(n);
+  const gr_uint row_length = static_cast<gr_uint>(size.row_length);
+  // iterate: p, next, scratch, row_length, pair_sum, collider_sum, collider_dx, friction_dx, n
+  set_buffer(m.iterate, kFirstOwn + 2, pairs ? &m.scratch : nullptr);
+  check(clSetKernelArg(m.iterate, kFirstOwn + 3, sizeof(gr_uint), &row_length), "clSetKernelArg");
+  set_buffer(m.iterate, kFirstOwn + 4, acc.pair ? &m.pair_sum : nullptr);
+  set_buffer(m.iterate, kFirstOwn + 5, acc.collider ? &m.collider_sum : nullptr);
+  set_buffer(m.iterate, kFirstOwn + 6, acc.collider_dx ? &m.collider_dx : nullptr);
+  set_buffer(m.iterate, kFirstOwn + 7, acc.friction_dx ? &m.friction_dx : nullptr);
+  check(clSetKernelArg(m.iterate, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+  // friction: p, next, pair_sum, collider_sum, collider_dx, friction_dx, n
+  set_buffer(m.friction, kFirstOwn + 2, acc.pair ? &m.pair_sum : nullptr);
+  set_buffer(m.friction, kFirstOwn + 3, acc.collider ? &m.collider_sum : nullptr);
+  set_buffer(m.friction, kFirstOwn + 4, acc.collider_dx ? &m.collider_dx : nullptr);
+  set_buffer(m.friction, kFirstOwn + 5, acc.friction_dx ? &m.friction_dx : nullptr);
+  check(clSetKernelArg(m.friction, kFirstOwn + 6, sizeof(int), &count), "clSetKernelArg");
+
+  // p and next swap after every pass, as the CPU loop swaps its iterates
+  Buffer* from = &m.p;
+  Buffer* to = &m.next;
+  // one work-group size whatever n is: a compiler that specialises kernels for it (PoCL) then
+  // builds each kernel once, not once per grain count
+  const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup;
+  auto pass = [&](cl_kernel k) {
+    set_buffer(k, kFirstOwn, from);
+    set_buffer(k, kFirstOwn + 1, to);
+    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+    std::swap(from, to);
+  };
+  // pins (g.targetstiffness set): their own group after each iteration, in place, on `from`
+  const bool pins = g.targetP && g.targetstiffness;
+  if (pins) {
+    m.upload(m.target, g.targetP, 3 * n * f);
+    m.upload(m.target_weight, g.targetweight, n * f);
+    m.upload(m.target_stiffness, g.targetstiffness, n * f);
+    check(clSetKernelArg(m.pin, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
+    set_buffer(m.pin, 1, &m.target);
+    set_buffer(m.pin, 2, g.targetweight ? &m.target_weight : nullptr);
+    set_buffer(m.pin, 3, &m.target_stiffness);
+    check(clSetKernelArg(m.pin, 5, sizeof(int), &count), "clSetKernelArg");
+  }
+  auto project_pins = [&] {
+    set_buffer(m.pin, 4, from);
+    check(clEnqueueNDRangeKernel(m.queue, m.pin, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+  };
+  for (int it = 0; it < iterations; ++it) {
+    pass(m.iterate);
+    if (friction_pass && accurate_friction) pass(m.friction);
+    if (pins) project_pins();
+  }
+  if (friction_pass && !accurate_friction) pass(m.friction);
+
+  m.download(*from, p, 3 * n * f);
+  m.download(m.pair_sum, acc.pair, size.pair_entries * u);
+  m.download(m.collider_sum, acc.collider, size.plane_entries * f);
+  m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
+  m.download(m.friction_dx, acc.friction_dx, 3 * n * f);
+}
+
+}  // namespace grains::opencl

@@ -29,18 +29,7 @@
       __global const float *constraintweight, __global const float *constraintstiffness,      \
       float uniform_radius, float uniform_inv_mass, int nbr_unconstrained
 
-GR_INLINE gr_grains gr_device_grains(
-    __global const float* P, __global const float* radius, __global const float* inv_mass,
-    __global const float* mass, __global const float* friction,
-    __global const float* repulsionweight, __global const float* repulsionstiffness,
-    __global const float* attractionweight, __global const float* attractionstiffness,
-    __global const gr_uint* nbr_offsets, __global const gr_uint* nbr_indices,
-    __global const float* pair_slip, __global const gr_uint* plane_offsets,
-    __global const float* plane, __global const float* plane_slip,
-    __global const gr_uint* con_offsets, __global const gr_uint* con_other,
-    __global const gr_uint* con_prim, __global const float* restlength,
-    __global const float* constraintweight, __global const float* constraintstiffness,
-    float uniform_radius, float uniform_inv_mass, int nbr_unconstrained) {
+GR_INLINE gr_grains gr_device_grains(GR_GRAINS_ARGS) {
   gr_grains g = {0};
   g.P = P;
   g.radius = radius;

@@ -338,16 +338,9 @@ void register_grains_node() {
 #undef GR_PARAM
   };
   t.make = [] { return std::make_unique<GrainsNode>(); };
-  // use_opencl: what the device cannot run yet is refused, and so is a machine without the device
+  // use_opencl on a machine without the device (or a GRAINS_OPENCL_DEVICE naming none) is refused
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
     if (!p.b("use_opencl")) return {"", ""};
-    GrainsSettings st;
-    st.chebyshev_rho = static_cast<float>(p.f("chebyshev_rho"));
-    st.enable_rigid_shape_matching = p.b("enable_rigid_shape_matching");
-    st.update_collisions_during_iterations = p.b("update_collisions_during_iterations");
-    st.update_neighbors_during_iterations = p.b("update_neighbors_during_iterations");
-    if (std::string what = GrainsSolver::opencl_unsupported(st); !what.empty())
-      return {what + " does not run on an OpenCL device yet: turn one of them off", "use_opencl"};
     opencl::DeviceChoice choice;
     std::string problem;
     if (!opencl::chosen_device(&choice, &problem)) return {problem, "use_opencl"};

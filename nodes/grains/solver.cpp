@@ -601,14 +601,6 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&)
 GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noexcept = default;
 
-std::string GrainsSolver::opencl_unsupported(const GrainsSettings& s) {
-  if (s.chebyshev_rho > 0) return "chebyshev_rho (Chebyshev acceleration)";
-  if (s.enable_rigid_shape_matching) return "enable_rigid_shape_matching";
-  if (s.update_collisions_during_iterations) return "update_collisions_during_iterations";
-  if (s.update_neighbors_during_iterations) return "update_neighbors_during_iterations";
-  return "";
-}
-
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
@@ -1014,13 +1006,39 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) gr_store3(p, i, gr_project_pin(&g, &prm, p, static_cast<int>(i)));
   };
+  // use_opencl (opencl/iterations.h): the device runs the grain loops of the iterations and
+  // friction passes (and the pins). With nothing between them on the host (no shape matching,
+  // no rebuild during the iterations, no Chebyshev step) every pass of the substep is one call;
+  // otherwise each pass is a call of its own and the host does the rest between them, as here.
+  const bool device = s.use_opencl;
+  if (device && !device_.device) device_.device = std::make_unique<opencl::Iterations>();
+  // one device call of `iterations` iterations on x (in place), then the friction pass once
+  // when `friction_after`; pins only in the whole-substep call (the loop below runs its own)
+  auto device_passes = [&](float* x, int count, bool friction_after, bool whole) {
+    opencl::IterationSizes size;
+    size.n = n;
+    size.pair_entries = g.nbr_offsets ? neighbors_.indices.size() : 0;
+    size.plane_entries = g.plane_offsets ? plane_offsets_[n] : 0;
+    size.prims = g.con_offsets ? d.prim_count : 0;
+    size.row_length = row_length_;
+    gr_grains gd = g;
+    if (!whole) gd.targetP = nullptr;
+    device_.device->run(gd, prm, size, x, acc, count,
+                        whole ? friction_pass : friction_after,
+                        whole ? s.accurate_friction : false);
+  };
   auto run_friction = [&] {
     const float* p = p_.data();
     float* next = p_next_.data();
+    if (device) {
+      std::copy(p_.begin(), p_.end(), p_next_.begin());
+      device_passes(next, 0, true, false);
+    } else {
 #pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) {
-      int ii = static_cast<int>(i);
-      gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
+      for (long i = 0; i < ln; ++i) {
+        int ii = static_cast<int>(i);
+        gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
+      }
     }
     p_.swap(p_next_);
     if (shapes_on) project_shapes(g, prm, threads);  // friction moved grains one by one
@@ -1028,20 +1046,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
-  if (s.use_opencl) {
-    if (std::string what = opencl_unsupported(s); !what.empty())
-      throw std::runtime_error("grains: use_opencl: " + what +
-                               " does not run on an OpenCL device yet: turn one of them off");
-    if (!device_.device) device_.device = std::make_unique<opencl::Iterations>();
-    opencl::IterationSizes size;
-    size.n = n;
-    size.pair_entries = g.nbr_offsets ? neighbors_.indices.size() : 0;
-    size.plane_entries = g.plane_offsets ? plane_offsets_[n] : 0;
-    size.prims = g.con_offsets ? d.prim_count : 0;
-    size.row_length = row_length_;
-    device_.device->run(g, prm, size, p_.data(), acc, iterations, friction_pass, s.accurate_friction);
-  }
-  for (int it = 0; it < iterations && !s.use_opencl; ++it) {
+  const bool device_whole = device && !shapes_on && !chebyshev &&
+                            !s.update_neighbors_during_iterations &&
+                            !s.update_collisions_during_iterations;
+  if (device_whole) device_passes(p_.data(), iterations, false, true);
+  for (int it = 0; it < iterations && !device_whole; ++it) {
     if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
     if (it > 0 && colliders_on && s.update_collisions_during_iterations) planes(false);
     const float* p = p_.data();
@@ -1049,19 +1058,35 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     float* next = chebyshev ? p_before_.data() : p_next_.data();
     omega = chebyshev ? gr_chebyshev_omega(it, s.chebyshev_rho, omega) : 1.0f;
     const float om = omega;
+    if (device) {
+      // the iteration on the device into p_next_, the Chebyshev step here
+      std::copy(p_.begin(), p_.end(), p_next_.begin());
+      device_passes(p_next_.data(), 1, false, false);
+      const float* x_hat = p_next_.data();
+      if (om != 1.0f) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+        for (long i = 0; i < ln; ++i) {
+          const int ii = static_cast<int>(i);
+          gr_store3(next, ii, gr_chebyshev(gr_load3(x_hat, ii), gr_load3(next, ii), om));
+        }
+      } else if (next != x_hat) {
+        std::copy(p_next_.begin(), p_next_.end(), p_before_.begin());
+      }
+    } else {
 #pragma omp parallel num_threads(threads)
-    {
-      gr_normal_sums mine = acc;  // this thread's row scratch
-      if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
-      // static: a thread takes the same grains every iteration, so the positions it reads were
-      // mostly written by itself and stay in its core's cache (with chunks handed out as they
-      // come, half the reads fetched lines the other core had just written)
+      {
+        gr_normal_sums mine = acc;  // this thread's row scratch
+        if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
+        // static: a thread takes the same grains every iteration, so the positions it reads were
+        // mostly written by itself and stay in its core's cache (with chunks handed out as they
+        // come, half the reads fetched lines the other core had just written)
 #pragma omp for schedule(static)
-      for (long i = 0; i < ln; ++i) {
-        int ii = static_cast<int>(i);
-        gr_float3 x = gr_iterate(&g, &prm, p, ii, &mine);
-        if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
-        gr_store3(next, ii, x);
+        for (long i = 0; i < ln; ++i) {
+          int ii = static_cast<int>(i);
+          gr_float3 x = gr_iterate(&g, &prm, p, ii, &mine);
+          if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
+          gr_store3(next, ii, x);
+        }
       }
     }
     (chebyshev ? p_before_ : p_next_).swap(p_);
@@ -1069,7 +1094,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     if (friction_pass && s.accurate_friction) run_friction();
     if (g.targetP) project_pins();  // once an iteration, last
   }
-  if (friction_pass && !s.accurate_friction && !s.use_opencl) run_friction();
+  if (friction_pass && !s.accurate_friction && !device_whole) run_friction();
 
   // 4. velocity, drift, final collisions; write P and v
   {

@@ -123,9 +123,6 @@ struct GrainsStats {
 class GrainsSolver {
  public:
   static constexpr int kContactSlots = 4;  // = GR_MAX_PLANES (checked in solver.cpp)
-  // What use_opencl cannot run yet, as the parameter that asks for it ("" when nothing): the
-  // loader refuses such a graph, and substep() throws for one that reaches it.
-  static std::string opencl_unsupported(const GrainsSettings& s);
   void substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                size_t collider_count, GrainsStats* stats = nullptr);
   // What one substep leaves for the next, at a frame's end (Node::save_state): the neighbour

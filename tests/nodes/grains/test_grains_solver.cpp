@@ -600,8 +600,7 @@ TEST_CASE("over-relaxation speeds up convergence of a stack", "[grains]") {
   CHECK(boosted < 0.8f * plain);
 }
 
-TEST_CASE("Chebyshev acceleration (not in POP Grains) settles a pile with less overlap",
-          "[grains]") {
+static void check_chebyshev(bool opencl) {
   // An 8 x 10 x 10 block of grains (r = 5 cm, jittered) between four walls collapses into a
   // pile, 2 substeps x 20 iterations for 2 s. For a linear iteration whose slowest modes decay
   // like rho per iteration, Chebyshev extrapolation over the 15 iterations after the delay
@@ -623,6 +622,7 @@ TEST_CASE("Chebyshev acceleration (not in POP Grains) settles a pile with less o
     Scene sc;
     sc.s = settings(24, 2, 20);
     sc.s.chebyshev_rho = rho;
+    sc.s.use_opencl = opencl;
     sc.add_collider(ground());
     // four walls around the block: planes through the block's faces, normals inward
     auto wall = [](Vec3 at, Vec3 degrees) {
@@ -655,6 +655,17 @@ TEST_CASE("Chebyshev acceleration (not in POP Grains) settles a pile with less o
   report("walled 8-layer block, energy end / start, rho 0.95", fast.energy_end / fast.energy_start);
   CHECK(fast.pen < 0.5f * plain.pen);
   CHECK(fast.energy_end < fast.energy_start);
+}
+
+TEST_CASE("Chebyshev acceleration (not in POP Grains) settles a pile with less overlap",
+          "[grains]") {
+  check_chebyshev(false);
+}
+
+TEST_CASE("use_opencl: Chebyshev acceleration settles a pile with less overlap on the OpenCL device",
+          "[grains][opencl]") {
+  // the iterations on PoCL's CPU device, the Chebyshev step on the host: the same bounds
+  check_chebyshev(true);
 }
 
 TEST_CASE("constraint averaging moves an asymmetric clump's centre and disabling it does not",
@@ -707,15 +718,15 @@ TEST_CASE("max neighbors: a tight cap misses contacts", "[grains]") {
   CHECK(capped > 2 * full);
 }
 
-TEST_CASE("update neighbours during iterations finds contacts the iterations create",
-          "[grains]") {
+static void check_update_neighbors(bool opencl) {
   // Query scale 1 gives no margin: B is pushed by A into C, which was not a candidate at
   // prediction. Without updates B and C end overlapping; rebuilt every iteration, the contact is
   // found and resolved to well under the initial 40% overlap.
-  auto run = [](bool update) {
+  auto run = [opencl](bool update) {
     GrainsSettings s = settings(24, 1, 20);
     s.neighbor_query_scale = 1.0f;
     s.update_neighbors_during_iterations = update;
+    s.use_opencl = opencl;
     Scene sc;
     sc.s = s;
     sc.gravity = {0, 0, 0};
@@ -734,17 +745,28 @@ TEST_CASE("update neighbours during iterations finds contacts the iterations cre
   CHECK(bc_fresh < 0.5f * bc_stale);
 }
 
-TEST_CASE("update collisions during iterations finds a collider the iterations push into",
-          "[grains][colliders]") {
+TEST_CASE("update neighbours during iterations finds contacts the iterations create",
+          "[grains]") {
+  check_update_neighbors(false);
+}
+
+TEST_CASE("use_opencl: update neighbours during iterations finds contacts the iterations create on the OpenCL device",
+          "[grains][opencl]") {
+  // each iteration on PoCL's CPU device after the host rebuilt the rows: the same bounds
+  check_update_neighbors(true);
+}
+
+static void check_update_collisions(bool opencl) {
   // Grain A (r = 5 cm) sits 10 cm above the ground, beyond the plane query range of
   // 1.5 r = 7.5 cm, and a 3x heavier grain B overlaps it from above by 9 cm. The contact
   // pushes A down by w_A / (w_A + w_B) x 9 cm = 6.75 cm, 1.75 cm into the ground. With planes
   // found once per substep A never learns of the ground; re-found every iteration, the ground
   // holds it and B is pushed up instead. No gravity, no friction, no final collision test: only the
   // iterations act.
-  auto ground_penetration = [](bool update) {
+  auto ground_penetration = [opencl](bool update) {
     GrainsSettings s = settings(24, 1, 10);
     s.update_collisions_during_iterations = update;
+    s.use_opencl = opencl;
     s.final_collision_test = false;
     s.friction_with_colliders = 0;
     s.friction_with_particles = 0;
@@ -763,6 +785,17 @@ TEST_CASE("update collisions during iterations finds a collider the iterations p
   // once: 3/4 of the 9 cm overlap, minus the 5 cm of clearance
   CHECK(once == Approx(0.75f * 0.09f - 0.05f).margin(1e-3));
   CHECK(every < 0.5f * once);
+}
+
+TEST_CASE("update collisions during iterations finds a collider the iterations push into",
+          "[grains][colliders]") {
+  check_update_collisions(false);
+}
+
+TEST_CASE("use_opencl: update collisions during iterations finds a collider the iterations push into on the OpenCL device",
+          "[grains][colliders][opencl]") {
+  // each iteration on PoCL's CPU device after the host re-found the planes: the same bounds
+  check_update_collisions(true);
 }
 
 TEST_CASE("a grain in a corner feels both surfaces", "[grains][colliders]") {

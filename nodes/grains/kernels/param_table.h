@@ -129,4 +129,4 @@ GR_PARAM(TOGGLE, enable_collision_feedback, 0, HOST, ,
          "accumulate the force and torque the grains put on each collider (DIR/colliders.csv)")
 /* the OpenCL backend (opencl/iterations.h) */
 GR_PARAM(TOGGLE, use_opencl, 0, HOST, ,
-         "run the iterations and friction passes on an OpenCL device: GRAINS_OPENCL_DEVICE=P:D picks it (`grains devices` lists them)")
+         "run the iterations, friction passes and pins on an OpenCL device: GRAINS_OPENCL_DEVICE=P:D picks it (`grains devices` lists them)")

@@ -136,37 +136,37 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   const size_t n = size.n;
   if (n == 0) return;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
-  // the inputs, once a substep
+  // the inputs, once a call, in Array order
   const struct {
-    Array slot;
     const void* host;
     size_t bytes;
   } inputs[] = {
-      {kP, g.P, 3 * n * f},
-      {kRadius, g.radius, n * f},
-      {kInvMass, g.inv_mass, n * f},
-      {kMass, g.mass, n * f},
-      {kFriction, g.friction, n * f},
-      {kRepulsionWeight, g.repulsionweight, n * f},
-      {kRepulsionStiffness, g.repulsionstiffness, n * f},
-      {kAttractionWeight, g.attractionweight, n * f},
-      {kAttractionStiffness, g.attractionstiffness, n * f},
-      {kNbrOffsets, g.nbr_offsets, (n + 1) * u},
-      {kNbrIndices, g.nbr_indices, size.pair_entries * u},
-      {kPairSlip, g.pair_slip, 3 * size.pair_entries * f},
-      {kPlaneOffsets, g.plane_offsets, (n + 1) * u},
-      {kPlane, g.plane, 9 * size.plane_entries * f},
-      {kPlaneSlip, g.plane_slip, 3 * size.plane_entries * f},
-      {kConOffsets, g.con_offsets, (n + 1) * u},
-      {kConOther, g.con_other, 2 * size.prims * u},
-      {kConPrim, g.con_prim, 2 * size.prims * u},
-      {kRestLength, g.restlength, size.prims * f},
-      {kConstraintWeight, g.constraintweight, n * f},
-      {kConstraintStiffness, g.constraintstiffness, n * f},
+      {g.P, 3 * n * f},
+      {g.radius, n * f},
+      {g.inv_mass, n * f},
+      {g.mass, n * f},
+      {g.friction, n * f},
+      {g.repulsionweight, n * f},
+      {g.repulsionstiffness, n * f},
+      {g.attractionweight, n * f},
+      {g.attractionstiffness, n * f},
+      {g.nbr_offsets, (n + 1) * u},
+      {g.nbr_indices, size.pair_entries * u},
+      {g.pair_slip, 3 * size.pair_entries * f},
+      {g.plane_offsets, (n + 1) * u},
+      {g.plane, 9 * size.plane_entries * f},
+      {g.plane_slip, 3 * size.plane_entries * f},
+      {g.con_offsets, (n + 1) * u},
+      {g.con_other, 2 * size.prims * u},
+      {g.con_prim, 2 * size.prims * u},
+      {g.restlength, size.prims * f},
+      {g.constraintweight, n * f},
+      {g.constraintstiffness, n * f},
   };
-  for (const auto& in : inputs)
+  static_assert(sizeof(inputs) / sizeof(inputs[0]) == kArrays, "one input per array");
+  for (int a = 0; a < kArrays; ++a)
     // positions: one float past the last grain, as the contact loop's block loads read
-    m.upload(m.arrays[in.slot], in.host, in.bytes, in.slot == kP ? in.bytes + f : 0);
+    m.upload(m.arrays[a], inputs[a].host, inputs[a].bytes, a == kP ? inputs[a].bytes + f : 0);
   m.upload(m.p, p, (3 * n + 1) * f);
   m.next.reserve(m.ctx, (3 * n + 1) * f);
   const bool pairs = acc.pair && g.nbr_offsets;
@@ -178,13 +178,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
 
   for (cl_kernel k : {m.iterate, m.friction}) {
     check(clSetKernelArg(k, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
-    for (int a = 0; a < kArrays; ++a) {
-      const Array slot = static_cast<Array>(a);
-      const void* host = nullptr;
-      for (const auto& in : inputs)
-        if (in.slot == slot) host = in.host;
-      set_buffer(k, 1 + a, host ? &m.arrays[a] : nullptr);
-    }
+    for (int a = 0; a < kArrays; ++a) set_buffer(k, 1 + a, inputs[a].host ? &m.arrays[a] : nullptr);
     const float ur = g.uniform_radius, uw = g.uniform_inv_mass;
     const int unconstrained = g.nbr_unconstrained;
     check(clSetKernelArg(k, 1 + kArrays, sizeof(float), &ur), "clSetKernelArg");

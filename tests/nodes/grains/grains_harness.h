@@ -198,6 +198,19 @@ struct Scene {
     for (size_t i = 0; i < size(); ++i) c += pos(i);
     return c / static_cast<float>(size());
   }
+  // an nx x ny x nz block of grains of radius r, 2r apart from the origin corner with the bottom
+  // layer resting on y = 0, each coordinate jittered by up to +-0.005 m (a fixed sequence)
+  void add_jittered_block(int nx, int ny, int nz, float r) {
+    uint32_t h = 12345;
+    auto jitter = [&h]() {
+      h = h * 1664525u + 1013904223u;
+      return (static_cast<float>(h >> 8) / 16777216.0f - 0.5f) * 0.01f;
+    };
+    for (int x = 0; x < nx; ++x)
+      for (int y = 0; y < ny; ++y)
+        for (int z = 0; z < nz; ++z)
+          add({x * 2 * r + jitter(), r + y * 2 * r + jitter(), z * 2 * r + jitter()}, r);
+  }
 };
 
 }  // namespace grains::test

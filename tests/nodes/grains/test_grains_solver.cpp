@@ -635,15 +635,7 @@ static void check_chebyshev(bool opencl) {
     sc.add_collider(wall({19 * r, 0, 0}, {0, 0, 90}));
     sc.add_collider(wall({0, 0, -r}, {90, 0, 0}));
     sc.add_collider(wall({0, 0, 19 * r}, {-90, 0, 0}));
-    uint32_t h = 12345;
-    auto jitter = [&h]() {
-      h = h * 1664525u + 1013904223u;
-      return (static_cast<float>(h >> 8) / 16777216.0f - 0.5f) * 0.01f;
-    };
-    for (int x = 0; x < 10; ++x)
-      for (int y = 0; y < 8; ++y)
-        for (int z = 0; z < 10; ++z)
-          sc.add({x * 2 * r + jitter(), r + y * 2 * r + jitter(), z * 2 * r + jitter()}, r);
+    sc.add_jittered_block(10, 8, 10, r);
     const float e0 = energy(sc);
     sc.run(2.0f);
     return Result{sc.stats.mean_penetration, e0, energy(sc)};

@@ -6,7 +6,7 @@
 # frames 2 on: frame 1 includes building the kernels), the last frame's mean and max overlap
 # (the error measure), and the largest position difference between the two runs' last frames.
 #
-# usage: bench/opencl.sh GRAPH FRAMES [GRAINS_BINARY] [OUT_DIR]
+# usage (from the repository root, ../shared beside it): bench/opencl.sh GRAPH FRAMES [GRAINS_BINARY] [OUT_DIR]
 set -euo pipefail
 graph=$1
 frames=$2
@@ -25,31 +25,15 @@ for backend in cpu opencl; do
           b, pts, wall / n / 1000, n + 1, pen, maxpen }' "$out/$backend/stats.csv"
 done
 last=$(printf "frame_%04d.ply" "$frames")
-python3 - "$out/cpu/$last" "$out/opencl/$last" <<'PY'
-import struct, sys
+# the frames read with the DEM reference's PLY reader (../shared/reference/dem/ply.py)
+python3 - "$(cd ../shared/reference/dem && pwd)" "$out/cpu/$last" "$out/opencl/$last" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[1])
+import ply
 def positions(path):
-    with open(path, "rb") as f:
-        data = f.read()
-    head, _, body = data.partition(b"end_header\n")
-    lines = head.decode().splitlines()
-    n, props, fmt = 0, [], "<"
-    for line in lines:
-        w = line.split()
-        if w[:2] == ["element", "vertex"]: n = int(w[2])
-        elif w[0] == "element" and n: break
-        elif w[0] == "property" and n: props.append((w[1], w[2]))
-    sizes = {"float": ("f", 4), "int": ("i", 4), "uchar": ("B", 1), "double": ("d", 8)}
-    fmt += "".join(sizes[t][0] for t, _ in props)
-    step = struct.calcsize(fmt)
-    names = [p for _, p in props]
-    ix, iy, iz = names.index("x"), names.index("y"), names.index("z")
-    iid = names.index("id") if "id" in names else None
-    out = {}
-    for k in range(n):
-        row = struct.unpack_from(fmt, body, k * step)
-        out[row[iid] if iid is not None else k] = (row[ix], row[iy], row[iz])
-    return out
-a, b = positions(sys.argv[1]), positions(sys.argv[2])
+    v = ply.read(path)["vertex"]
+    return {i: (x, y, z) for i, x, y, z in zip(v["id"], v["x"], v["y"], v["z"])}
+a, b = positions(sys.argv[2]), positions(sys.argv[3])
 worst = max(sum((p - q) ** 2 for p, q in zip(a[k], b[k])) ** 0.5 for k in a if k in b)
 print(f"largest position difference between the backends' last frames: {worst:.3g} m")
 PY

@@ -710,61 +710,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // primitives change (first seen, births, deaths, broken constraints); otherwise the stored rest
   // offsets are kept
   const bool shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
-  if (shapes_on) {
-    std::vector<int32_t> key;
-    key.reserve(1 + n + 2 * d.prim_count);
-    key.push_back(static_cast<int32_t>(n));
-    for (size_t i = 0; i < n; ++i) key.push_back(grain_id(d, i));
-    for (size_t e = 0; e < 2 * d.prim_count; ++e) {
-      int32_t a = d.prim_points[e];
-      key.push_back(a >= 0 && static_cast<size_t>(a) < n ? key[1 + a] : -1);
-    }
-    if (key != shape_key_) {
-      shape_key_.swap(key);
-      std::vector<int32_t> parent(n);
-      for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
-      for (size_t e = 0; e < d.prim_count; ++e) {
-        int32_t a = d.prim_points[2 * e], b = d.prim_points[2 * e + 1];
-        if (a < 0 || b < 0 || static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n) continue;
-        a = find_root(parent, a);
-        b = find_root(parent, b);
-        if (a != b) parent[std::max(a, b)] = std::min(a, b);
-      }
-      // components in order of their smallest grain; singletons are left out
-      std::vector<uint32_t> size(n, 0);
-      for (size_t i = 0; i < n; ++i) size[find_root(parent, static_cast<int32_t>(i))]++;
-      std::vector<int32_t> slot(n, -1);
-      comp_offsets_.assign(1, 0);
-      for (size_t i = 0; i < n; ++i)
-        if (parent[i] == static_cast<int32_t>(i) && size[i] > 1) {
-          slot[i] = static_cast<int32_t>(comp_offsets_.size()) - 1;
-          comp_offsets_.push_back(comp_offsets_.back() + size[i]);
-        }
-      comp_members_.resize(comp_offsets_.back());
-      std::vector<uint32_t> fill(comp_offsets_.begin(), comp_offsets_.end() - 1);
-      for (size_t i = 0; i < n; ++i) {
-        int32_t c = slot[find_root(parent, static_cast<int32_t>(i))];
-        if (c >= 0) comp_members_[fill[c]++] = static_cast<uint32_t>(i);
-      }
-      // rest offsets from the mass-weighted centre of each component
-      rest_offset_.assign(3 * n, 0.0f);
-      for (size_t c = 0; c + 1 < comp_offsets_.size(); ++c) {
-        Vec3 centre;
-        double msum = 0;
-        for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
-          uint32_t i = comp_members_[k];
-          centre += load3(d.P, i) * mass_[i];
-          msum += mass_[i];
-        }
-        centre = centre / static_cast<float>(msum);
-        for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
-          store3(rest_offset_.data(), comp_members_[k], load3(d.P, comp_members_[k]) - centre);
-      }
-    }
-    // 3 n + 1, as p_: project_shapes swaps the two, and the contact loop's block load reads
-    // one float past a grain's three (gr_load_block; AddressSanitizer caught the last grain's)
-    shape_goal_.resize(3 * n + 1);
-  }
+  if (shapes_on) build_shapes(d);
 
   // explicit constraints (constraints_on above)
   if (constraints_on) {
@@ -963,37 +909,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
   // removed from the start and predicted positions alike, without velocity
   if (s.pre_stabilization && ((pairs_on && s.internal_collisions_weight > 0) || colliders_on)) {
-    gr_params ps = prm;
-    ps.clumping_weight = 0.0f;
-    gr_grains gs = g;
-    if (!(s.internal_collisions_weight > 0)) gs.nbr_offsets = nullptr;
-    P_stable_.resize(3 * n + 1);
-    p_stable_next_.resize(3 * n + 1);
-    std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
-    // until no grain moves more than kStabilizeTolerance of its radius, at most
-    // constraint_iterations passes (and kStabilizeIterations): at rest one pass finds almost
-    // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
-    // passes in most substeps, most of the substep's work, all of it without friction.
-    const int stabilize_max = std::min(kStabilizeIterations, iterations);
-    for (int k = 0; k < stabilize_max; ++k) {
-      const float* x = P_stable_.data();
-      float* next = p_stable_next_.data();
-      float moved = 0;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved)
-      for (long i = 0; i < ln; ++i) {
-        const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i));
-        const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
-        moved = std::max(moved, gr_length(d) / radius_[i]);
-        gr_store3(next, i, y);
-      }
-      P_stable_.swap(p_stable_next_);
-      if (!(moved > kStabilizeTolerance)) break;
-    }
-    float* p = p_.data();
-    const float* x = P_stable_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i)
-      for (int a = 0; a < 3; ++a) p[3 * i + a] += x[3 * i + a] - P0_[3 * i + a];
+    pre_stabilize(g, prm, s.internal_collisions_weight > 0, iterations, threads);
     g.P = P_stable_.data();
   }
 
@@ -1096,59 +1012,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
   if (friction_pass && !s.accurate_friction && !device_whole) run_friction();
 
-  // 4. velocity, drift, final collisions; write P and v
-  {
-    const float* p = p_.data();
-    const bool final_test = s.final_collision_test && colliders_on;
-    std::vector<uint8_t> still(collider_count);
-    for (size_t c = 0; c < collider_count; ++c) still[c] = colliders[c].still() ? 1 : 0;
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) {
-      int ii = static_cast<int>(i);
-      gr_float3 Pk, vk;
-      gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
-      if (s.keep_velocity) vk = gr_load3(d.v, ii);
-      // back to world space (exact for a grain that stays: see local_origin)
-      const Vec3 a = load3(d.P, i);
-      Vec3 b = to_vec(Pk) + origin, v = to_vec(vk);
-      const Vec3 v_loop = v;
-      int32_t hit = -1;
-      Vec3 hit_n;
-      if (final_test) {
-        SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
-                         s.static_threshold, s.scale_kinetic};
-        final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,
-                        &hit_n);
-      }
-      store3(d.P, i, b);
-      store3(d.v, i, v);
-      if (!impacts) continue;
-      // Momentum from each collider plane: its applied corrections dx_c moved the grain, and
-      // v = (p - P) / dt turns a displacement into a velocity change dx_c / dt; the final pass
-      // changes v directly (added to its collider's slot, or a free one). Blend and caps, which
-      // act on v after the loop, are not counted.
-      const int K = GR_MAX_PLANES;
-      const uint32_t row = plane_offsets_[i];
-      const int planes = static_cast<int>(plane_offsets_[i + 1] - row);
-      int hit_slot = -1;
-      for (int q = 0; q < K; ++q) {
-        const size_t slot = K * i + q;
-        const int32_t c = q < planes ? plane_collider_[row + q] : -1;
-        Vec3 dv = c >= 0 ? load3(collider_dx_.data(), slot) / s.dt : Vec3{};
-        Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * (row + q), 1) : Vec3{};
-        if (hit >= 0 && hit_slot < 0 && (c == hit || c < 0)) {
-          hit_slot = q;
-          dv += v - v_loop;
-          if (c < 0) n_c = hit_n;
-        }
-        const bool any = !(dv.x == 0 && dv.y == 0 && dv.z == 0);
-        d.impact_collider[slot] = any ? (c >= 0 ? c : hit) : -1;
-        store3(d.impact_impulse, slot, any ? dv * mass_[i] : Vec3{});
-        store3(d.impact_normal, slot, n_c);
-        store3(d.impact_point, slot, b - n_c * radius_[i]);
-      }
-    }
-  }
+  // 4. velocity, drift, final collisions; write P and v (and the impact data)
+  write_back(d, s, g, prm, colliders, collider_count, origin, impacts, threads);
 
   if (history)
     save_history(d, s, g, prm, p_.data(), pair_friction_pass, collider_friction_pass, threads);
@@ -1159,24 +1024,192 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (constraints_on) update_constraints(d, s, threads, stats);
 
   // stats: serial, in a fixed order
-  if (stats && pairs_on) {
-    double sum = 0;
-    for (size_t i = 0; i < n; ++i) {
-      Vec3 pi = load3(d.P, i);
-      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-        uint32_t j = neighbors_.indices[k];
-        if (j <= i) continue;
-        float rsum = radius_[i] + radius_[j];
-        float overlap = rsum - length(pi - load3(d.P, j));
-        if (overlap <= 0) continue;
-        float pen = overlap / rsum;
-        stats->max_penetration = std::max(stats->max_penetration, pen);
-        sum += pen;
-        ++stats->contacts;
-      }
-    }
-    if (stats->contacts) stats->mean_penetration = static_cast<float>(sum / stats->contacts);
+  if (stats && pairs_on) contact_stats(d, stats);
+}
+
+// Rigid shape matching's components: the connected components of the 2-point primitives
+// (union-find) and their rest offsets, rebuilt from the start positions d.P whenever the grains
+// or the primitives change; otherwise kept.
+void GrainsSolver::build_shapes(const GrainsData& d) {
+  const size_t n = d.n;
+  std::vector<int32_t> key;
+  key.reserve(1 + n + 2 * d.prim_count);
+  key.push_back(static_cast<int32_t>(n));
+  for (size_t i = 0; i < n; ++i) key.push_back(grain_id(d, i));
+  for (size_t e = 0; e < 2 * d.prim_count; ++e) {
+    int32_t a = d.prim_points[e];
+    key.push_back(a >= 0 && static_cast<size_t>(a) < n ? key[1 + a] : -1);
   }
+  if (key != shape_key_) {
+    shape_key_.swap(key);
+    std::vector<int32_t> parent(n);
+    for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
+    for (size_t e = 0; e < d.prim_count; ++e) {
+      int32_t a = d.prim_points[2 * e], b = d.prim_points[2 * e + 1];
+      if (a < 0 || b < 0 || static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n) continue;
+      a = find_root(parent, a);
+      b = find_root(parent, b);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+    // components in order of their smallest grain; singletons are left out
+    std::vector<uint32_t> size(n, 0);
+    for (size_t i = 0; i < n; ++i) size[find_root(parent, static_cast<int32_t>(i))]++;
+    std::vector<int32_t> slot(n, -1);
+    comp_offsets_.assign(1, 0);
+    for (size_t i = 0; i < n; ++i)
+      if (parent[i] == static_cast<int32_t>(i) && size[i] > 1) {
+        slot[i] = static_cast<int32_t>(comp_offsets_.size()) - 1;
+        comp_offsets_.push_back(comp_offsets_.back() + size[i]);
+      }
+    comp_members_.resize(comp_offsets_.back());
+    std::vector<uint32_t> fill(comp_offsets_.begin(), comp_offsets_.end() - 1);
+    for (size_t i = 0; i < n; ++i) {
+      int32_t c = slot[find_root(parent, static_cast<int32_t>(i))];
+      if (c >= 0) comp_members_[fill[c]++] = static_cast<uint32_t>(i);
+    }
+    // rest offsets from the mass-weighted centre of each component
+    rest_offset_.assign(3 * n, 0.0f);
+    for (size_t c = 0; c + 1 < comp_offsets_.size(); ++c) {
+      Vec3 centre;
+      double msum = 0;
+      for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
+        uint32_t i = comp_members_[k];
+        centre += load3(d.P, i) * mass_[i];
+        msum += mass_[i];
+      }
+      centre = centre / static_cast<float>(msum);
+      for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
+        store3(rest_offset_.data(), comp_members_[k], load3(d.P, comp_members_[k]) - centre);
+    }
+  }
+  // 3 n + 1, as p_: project_shapes swaps the two, and the contact loop's block load reads
+  // one float past a grain's three (gr_load_block; AddressSanitizer caught the last grain's)
+  shape_goal_.resize(3 * n + 1);
+}
+
+// Pre-stabilization (gr_stabilize, Macklin et al. 2014 sec. 4.4): Jacobi passes of the contacts
+// alone on the start positions P0_ into P_stable_, until no grain moves more than
+// kStabilizeTolerance of its radius (at most `iterations` and kStabilizeIterations passes); the
+// predicted positions p_ move by the same amounts, so the overlaps the substep began with are
+// removed without becoming velocity. `pairs`: grain pairs take part (else collider planes only).
+void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool pairs,
+                                 int iterations, int threads) {
+  const size_t n = n_;
+  const long ln = static_cast<long>(n);
+  gr_params ps = prm;
+  ps.clumping_weight = 0.0f;
+  gr_grains gs = g;
+  if (!pairs) gs.nbr_offsets = nullptr;
+  P_stable_.resize(3 * n + 1);
+  p_stable_next_.resize(3 * n + 1);
+  std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
+  // until no grain moves more than kStabilizeTolerance of its radius, at most
+  // constraint_iterations passes (and kStabilizeIterations): at rest one pass finds almost
+  // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
+  // passes in most substeps, most of the substep's work, all of it without friction.
+  const int stabilize_max = std::min(kStabilizeIterations, iterations);
+  for (int k = 0; k < stabilize_max; ++k) {
+    const float* x = P_stable_.data();
+    float* next = p_stable_next_.data();
+    float moved = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved)
+    for (long i = 0; i < ln; ++i) {
+      const gr_float3 y = gr_stabilize(&gs, &ps, x, static_cast<int>(i));
+      const gr_float3 d = gr_sub(y, gr_load3(x, static_cast<int>(i)));
+      moved = std::max(moved, gr_length(d) / radius_[i]);
+      gr_store3(next, i, y);
+    }
+    P_stable_.swap(p_stable_next_);
+    if (!(moved > kStabilizeTolerance)) break;
+  }
+  float* p = p_.data();
+  const float* x = P_stable_.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i)
+    for (int a = 0; a < 3; ++a) p[3 * i + a] += x[3 * i + a] - P0_[3 * i + a];
+}
+
+// The substep's end: velocity from the iterate (gr_update_velocity: blend, caps, drift), the
+// swept final collision test against the colliders, P and v written back in world space (the
+// substep's coordinates plus origin), and with `impacts` each collider's momentum on the grain.
+void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_grains& g,
+                              const gr_params& prm, const ColliderState* colliders,
+                              size_t collider_count, const Vec3& origin, bool impacts,
+                              int threads) {
+  const long ln = static_cast<long>(d.n);
+  const bool colliders_on = collider_count > 0;
+  const float* p = p_.data();
+  const bool final_test = s.final_collision_test && colliders_on;
+  std::vector<uint8_t> still(collider_count);
+  for (size_t c = 0; c < collider_count; ++c) still[c] = colliders[c].still() ? 1 : 0;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long i = 0; i < ln; ++i) {
+    int ii = static_cast<int>(i);
+    gr_float3 Pk, vk;
+    gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
+    if (s.keep_velocity) vk = gr_load3(d.v, ii);
+    // back to world space (exact for a grain that stays: see local_origin)
+    const Vec3 a = load3(d.P, i);
+    Vec3 b = to_vec(Pk) + origin, v = to_vec(vk);
+    const Vec3 v_loop = v;
+    int32_t hit = -1;
+    Vec3 hit_n;
+    if (final_test) {
+      SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
+                       s.static_threshold, s.scale_kinetic};
+      final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,
+                      &hit_n);
+    }
+    store3(d.P, i, b);
+    store3(d.v, i, v);
+    if (!impacts) continue;
+    // Momentum from each collider plane: its applied corrections dx_c moved the grain, and
+    // v = (p - P) / dt turns a displacement into a velocity change dx_c / dt; the final pass
+    // changes v directly (added to its collider's slot, or a free one). Blend and caps, which
+    // act on v after the loop, are not counted.
+    const int K = GR_MAX_PLANES;
+    const uint32_t row = plane_offsets_[i];
+    const int planes = static_cast<int>(plane_offsets_[i + 1] - row);
+    int hit_slot = -1;
+    for (int q = 0; q < K; ++q) {
+      const size_t slot = K * i + q;
+      const int32_t c = q < planes ? plane_collider_[row + q] : -1;
+      Vec3 dv = c >= 0 ? load3(collider_dx_.data(), slot) / s.dt : Vec3{};
+      Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * (row + q), 1) : Vec3{};
+      if (hit >= 0 && hit_slot < 0 && (c == hit || c < 0)) {
+        hit_slot = q;
+        dv += v - v_loop;
+        if (c < 0) n_c = hit_n;
+      }
+      const bool any = !(dv.x == 0 && dv.y == 0 && dv.z == 0);
+      d.impact_collider[slot] = any ? (c >= 0 ? c : hit) : -1;
+      store3(d.impact_impulse, slot, any ? dv * mass_[i] : Vec3{});
+      store3(d.impact_normal, slot, n_c);
+      store3(d.impact_point, slot, b - n_c * radius_[i]);
+    }
+  }
+}
+
+// Overlap statistics of the written positions over the neighbour rows, serial in a fixed order
+// (the same for any thread count): touching pairs, the largest and mean overlap / summed radii.
+void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const {
+  const size_t n = d.n;
+  double sum = 0;
+  for (size_t i = 0; i < n; ++i) {
+    Vec3 pi = load3(d.P, i);
+    for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
+      uint32_t j = neighbors_.indices[k];
+      if (j <= i) continue;
+      float rsum = radius_[i] + radius_[j];
+      float overlap = rsum - length(pi - load3(d.P, j));
+      if (overlap <= 0) continue;
+      float pen = overlap / rsum;
+      stats->max_penetration = std::max(stats->max_penetration, pen);
+      sum += pen;
+      ++stats->contacts;
+    }
+  }
+  if (stats->contacts) stats->mean_penetration = static_cast<float>(sum / stats->contacts);
 }
 
 // The rows just built from the predicted positions p_ hold every candidate within

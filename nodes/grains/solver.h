@@ -156,6 +156,15 @@ class GrainsSolver {
                     const gr_params& prm, const float* p, bool pairs, bool planes, int threads);
   int32_t previous_index(int32_t id) const;
 
+  // the substep's stages (solver.cpp)
+  void build_shapes(const GrainsData& d);
+  void pre_stabilize(const gr_grains& g, const gr_params& prm, bool pairs, int iterations,
+                     int threads);
+  void write_back(GrainsData& d, const GrainsSettings& s, const gr_grains& g, const gr_params& prm,
+                  const ColliderState* colliders, size_t collider_count, const Vec3& origin,
+                  bool impacts, int threads);
+  void contact_stats(const GrainsData& d, GrainsStats* stats) const;
+
   // Verlet reuse of the neighbour rows across substeps (substep(): keep_rows)
   void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
                      int threads);

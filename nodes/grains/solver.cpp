@@ -705,10 +705,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     g.targetstiffness = d.targetstiffness;
   }
 
-  // rigid shape matching: connected components of the 2-point primitives (union-find) and their
-  // rest shapes, rebuilt from the start-of-substep positions whenever the grains or the
-  // primitives change (first seen, births, deaths, broken constraints); otherwise the stored rest
-  // offsets are kept
+  // rigid shape matching: its components and rest shapes (build_shapes)
   const bool shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
   if (shapes_on) build_shapes(d);
 
@@ -1029,7 +1026,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
 // Rigid shape matching's components: the connected components of the 2-point primitives
 // (union-find) and their rest offsets, rebuilt from the start positions d.P whenever the grains
-// or the primitives change; otherwise kept.
+// or the primitives change (first seen, births, deaths, broken constraints); otherwise the stored
+// rest offsets are kept.
 void GrainsSolver::build_shapes(const GrainsData& d) {
   const size_t n = d.n;
   std::vector<int32_t> key;

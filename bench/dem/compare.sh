@@ -21,11 +21,8 @@ collapse() {  # name, extra --set arguments
   local d="$out/collapse_$name"
   rm -rf "$d"  # run refuses a used folder: the measuring folder m/ comes after
   local t; t=$(cpu $G run bench/validation/dem_collapse.json --quiet --threads 1 --out "$d" "$@")
-  mkdir -p "$d/m"
-  cp "$ref/results/collapse_np1_initial.dump" "$d/m/initial.dump"
-  python3 "$ref/ply_to_dump.py" "$d/frame_0023.ply" "$d/m/final.dump" > /dev/null
-  python3 "$ref/metrics.py" collapse "$d/m" | python3 -c "import json,sys; j=json.load(sys.stdin); \
-print('collapse $name cpu_s $t runout', j['runout'], 'dem 0.863 H/L0', j['H_inf_over_L0'], 'dem 2.001')"
+  local m; m=$(bash bench/dem/collapse_metrics.sh "$d")
+  echo "collapse $name cpu_s $t $m (dem runout 0.863 H/L0 2.001)"
 }
 
 pile() {

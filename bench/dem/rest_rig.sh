@@ -9,7 +9,6 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=out/rest_rig
 if [ $# -gt 0 ] && [ "${1#--}" = "$1" ]; then out=$1; shift; fi
-ref=$(cd ../shared/reference/dem && pwd)
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 G=$(pwd)/build/grains
@@ -42,8 +41,4 @@ $G run "$out/rest.json" --quiet --threads 1 --out "$out/rest" "$@" > /dev/null
 echo "rest: $($G heap "$out/rest/frame_0023.ply" --d 0.01 | cut -d: -f2), kinetic energy $(tail -1 "$out/rest/stats.csv" | cut -d, -f9) J"
 rm -rf "$out/collapse"
 $G run bench/validation/dem_collapse.json --quiet --threads 1 --out "$out/collapse" "$@" > /dev/null
-mkdir -p "$out/collapse/m"
-cp "$ref/results/collapse_np1_initial.dump" "$out/collapse/m/initial.dump"
-python3 "$ref/ply_to_dump.py" "$out/collapse/frame_0023.ply" "$out/collapse/m/final.dump" > /dev/null
-python3 "$ref/metrics.py" collapse "$out/collapse/m" | python3 -c "import json,sys; j=json.load(sys.stdin); \
-print('collapse: run-out', j['runout'], '(DEM 0.863), H/L0', j['H_inf_over_L0'], '(DEM 2.001)')"
+echo "collapse: $(bash bench/dem/collapse_metrics.sh "$out/collapse") (DEM runout 0.863, H/L0 2.001)"

@@ -601,6 +601,30 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&)
 GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noexcept = default;
 
+// The substep's inputs and switches its stages share (substep() fills it; n is n_)
+struct GrainsSolver::SubstepContext {
+  SubstepContext(GrainsData& data, const GrainsSettings& settings, const ColliderState* cs,
+                 size_t count, gr_grains& grains, gr_params& params, gr_normal_sums& sums)
+      : d(data), s(settings), colliders(cs), collider_count(count), g(grains), prm(params),
+        acc(sums) {}
+  GrainsData& d;
+  const GrainsSettings& s;
+  const ColliderState* colliders;
+  size_t collider_count;
+  gr_grains& g;
+  gr_params& prm;
+  gr_normal_sums& acc;
+  Vec3 origin{};
+  int threads = 1;
+  int iterations = 0;
+  bool pairs_on = false, colliders_on = false, constraints_on = false, shapes_on = false;
+  bool pair_friction_pass = false, collider_friction_pass = false, impacts = false;
+  bool reusable = false;   // the neighbour rows may be kept across substeps (keep_rows)
+  bool same_rows = false;  // they were: this substep's rows are the last one's
+  const float* search_radius = nullptr;
+  NeighborQuery q;
+};
+
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
@@ -744,161 +768,42 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 
   // 2. neighbour candidates and collider planes from the predicted positions
+  SubstepContext c(d, s, colliders, collider_count, g, prm, acc);
+  c.origin = origin;
+  c.threads = threads;
+  c.iterations = iterations;
+  c.pairs_on = pairs_on;
+  c.colliders_on = colliders_on;
+  c.constraints_on = constraints_on;
+  c.shapes_on = shapes_on;
+  c.pair_friction_pass = pair_friction_pass;
+  c.collider_friction_pass = collider_friction_pass;
+  c.impacts = impacts;
   // assume_uniform_radius: one grid cell size and every grain searched as the largest one, a
   // superset of the true candidates. With equal radii that is the same set, found faster; with
   // mixed radii small grains gather farther candidates and max_neighbors fills with them, so the
   // toggle is for scenes whose grains share one size (help page "Assume Uniform Radius").
-  const float* search_radius = radius_;
+  c.search_radius = radius_;
   if (s.assume_uniform_radius && !(g.uniform_radius > 0)) {  // equal radii need no copy
     float r_max = 0;
     for (size_t i = 0; i < n; ++i) r_max = std::max(r_max, radius_[i]);
     search_radius_.assign(n, r_max);
-    search_radius = search_radius_.data();
+    c.search_radius = search_radius_.data();
   }
-  NeighborQuery q;
-  q.query_scale = s.neighbor_query_scale;
-  q.max_neighbors = s.max_neighbors;
-  q.uniform_radius = s.assume_uniform_radius;
-  q.threads = threads;
+  c.q.query_scale = s.neighbor_query_scale;
+  c.q.max_neighbors = s.max_neighbors;
+  c.q.uniform_radius = s.assume_uniform_radius;
+  c.q.threads = threads;
   // Verlet reuse (keep_rows): the rows of the last substep still hold every pair that can touch
   // in this one when the grains are the same, in the same order, and none has moved more than
   // a quarter of the rows' skin since they were built (see rows_skin_)
-  const bool reusable = !(s.clumping_weight > 0) && !constraints_on &&
-                        !s.update_neighbors_during_iterations;
-  auto keep_rows = [&] {
-    if (!reusable || !rows_valid_ || rows_ids_.size() != n || !(rows_skin_ > 0)) return false;
-    if (rows_query_scale_ != s.neighbor_query_scale || rows_max_ != s.max_neighbors ||
-        rows_uniform_ != s.assume_uniform_radius)
-      return false;
-    for (size_t i = 0; i < n; ++i)
-      if (rows_ids_[i] != grain_id(d, i) ||
-          rows_radius_[i] != radius_[i])
-        return false;
-    const float* p = p_.data();
-    const float* b = rows_p_.data();
-    float moved2 = 0;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved2)
-    for (long i = 0; i < ln; ++i) {
-      const float x = p[3 * i] - b[3 * i], y = p[3 * i + 1] - b[3 * i + 1],
-                  z = p[3 * i + 2] - b[3 * i + 2];
-      moved2 = std::max(moved2, x * x + y * y + z * z);
-    }
-    return std::sqrt(moved2) < 0.25f * rows_skin_;
-  };
-  bool same_rows = false;
-  auto find_pairs = [&](bool first) {
-    if (!first && pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
-    // The friction pass's per-entry sums and the search's list store are about the same size
-    // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
-    // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
-    // carry the sums over and use the search's own store.
-    if (first && keep_rows()) {
-      same_rows = true;
-    } else {
-      // the contact history's lookup reads last substep's rows
-      if (first && pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
-      search_.find(p_.data(), search_radius, n, q, neighbors_,
-                   first && pair_friction_pass ? &pair_normal_ : nullptr);
-      rows_valid_ = false;
-      if (first && reusable) remember_rows(d, s, search_radius, threads);
-    }
-    // mutually constrained grains that do not collide: drop their pairs once here rather than
-    // look each one up in every iteration; rows keep their order and their max_neighbors cut
-    if (constraints_on && !s.collide_mutually_constrained_particles) {
-      drop_constrained_pairs(threads);
-      g.nbr_unconstrained = 1;
-    }
-    g.nbr_offsets = neighbors_.offsets.data();
-    g.nbr_indices = neighbors_.indices.data();
-    if (!pair_friction_pass) return;
-    const size_t entries = neighbors_.indices.size();
-    size_t longest = 0;
-    for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
-    // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
-    row_length_ = (std::max<size_t>(longest, 1) + GR_LANES - 1) / GR_LANES * GR_LANES;
-    // each thread's row a whole number of cache lines apart from the next one's, plus a line:
-    // threads writing one line between them every grain would pass it back and forth
-    row_stride_ = (row_length_ + 15) / 16 * 16 + 16;
-    pair_normal_it_.resize(row_stride_ * size_t(threads));
-    if (first) {
-      pair_normal_.assign(entries, 0u);  // the bits of 0.0f
-    } else {
-      // carry each pair's accumulated overlap over to its slot in the rebuilt rows
-      std::vector<uint32_t> old;
-      old.swap(pair_normal_);
-      pair_normal_.assign(entries, 0u);
-      std::vector<float> old_slip;
-      old_slip.swap(pair_slip_);
-      pair_slip_.assign(3 * entries, 0.0f);
-#pragma omp parallel for schedule(static) num_threads(threads)
-      for (long i = 0; i < ln; ++i)
-        for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
-          for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
-            if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
-              pair_normal_[k] = old[m];
-              std::copy_n(&old_slip[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
-              break;
-            }
-      g.pair_slip = pair_slip_.data();
-    }
-    acc.pair_iteration = pair_normal_it_.data();
-    acc.pair = pair_normal_.data();
-  };
-  if (pairs_on) find_pairs(true);
-  // collider planes. What the iterations accumulate per plane follows its collider through a
-  // rebuild during the iterations, not its place in the nearest-first row (two planes swap when
-  // the iterations push a grain nearer the second): the friction pass's sums, per plane entry,
-  // and the impact data's applied corrections, per slot. A collider the rebuilt row no longer
-  // holds takes its sums with it.
-  auto planes = [&](bool first) {
-    const bool carry = !first && (collider_friction_pass || impacts);
-    std::vector<float> old_slip;
-    if (carry) {
-      prev_plane_offsets_.swap(plane_offsets_);
-      prev_plane_collider_.swap(plane_collider_);
-      if (collider_friction_pass) prev_collider_normal_.swap(collider_normal_);
-      if (collider_friction_pass) old_slip.swap(plane_slip_);
-    }
-    find_planes(P0_, p_.data(), origin, colliders, collider_count, s.neighbor_query_scale,
-                threads);
-    g.plane_offsets = plane_offsets_.data();
-    g.plane = plane_.data();
-    if (collider_friction_pass) {
-      collider_normal_.assign(plane_offsets_[n], 0.0f);
-      acc.collider = collider_normal_.data();
-    }
-    if (!carry) return;
-    if (collider_friction_pass) {
-      plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
-      g.plane_slip = plane_slip_.data();
-    }
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) {
-      constexpr int K = GR_MAX_PLANES;
-      float dx[3 * K];
-      float* slots = impacts ? collider_dx_.data() + 3 * K * i : nullptr;
-      if (slots) {
-        std::copy(slots, slots + 3 * K, dx);
-        std::fill(slots, slots + 3 * K, 0.0f);
-      }
-      const uint32_t b = plane_offsets_[i], pb = prev_plane_offsets_[i];
-      for (uint32_t e = b; e < plane_offsets_[i + 1]; ++e)
-        for (uint32_t m = pb; m < prev_plane_offsets_[i + 1]; ++m) {
-          if (prev_plane_collider_[m] != plane_collider_[e]) continue;
-          if (collider_friction_pass) {
-            collider_normal_[e] = prev_collider_normal_[m];
-            std::copy_n(&old_slip[3 * size_t(m)], 3, &plane_slip_[3 * size_t(e)]);
-          }
-          if (slots) std::copy(dx + 3 * (m - pb), dx + 3 * (m - pb + 1), slots + 3 * (e - b));
-          break;
-        }
-    }
-  };
-  if (colliders_on) planes(true);
+  c.reusable = !(s.clumping_weight > 0) && !constraints_on && !s.update_neighbors_during_iterations;
+  if (pairs_on) find_pairs(c, true);
+  if (colliders_on) update_planes(c, true);
   // contact history (load_history): each contact's slip left from earlier substeps
   const bool history = pair_friction_pass || collider_friction_pass;
   if (history) {
-    load_history(d, pair_friction_pass, collider_friction_pass, same_rows, threads);
+    load_history(d, pair_friction_pass, collider_friction_pass, c.same_rows, threads);
     if (pair_friction_pass) g.pair_slip = pair_slip_.data();
     if (collider_friction_pass) g.plane_slip = plane_slip_.data();
   }
@@ -910,104 +815,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     g.P = P_stable_.data();
   }
 
-  // 3. Jacobi iterations
-  // friction is its own pass (gr_friction_pass), never inside the contact gather
-  const bool friction_pass = pair_friction_pass || collider_friction_pass;
-  // pins: their own group, after the averaged update and the shapes (kernels/pin.h)
-  auto project_pins = [&] {
-    float* p = p_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) gr_store3(p, i, gr_project_pin(&g, &prm, p, static_cast<int>(i)));
-  };
-  // use_opencl (opencl/iterations.h): the device runs the grain loops of the iterations and
-  // friction passes (and the pins). With nothing between them on the host (no shape matching,
-  // no rebuild during the iterations, no Chebyshev step) every pass of the substep is one call;
-  // otherwise each pass is a call of its own and the host does the rest between them, as here.
-  const bool device = s.use_opencl;
-  if (device && !device_.device) device_.device = std::make_unique<opencl::Iterations>();
-  // one device call of `iterations` iterations on x (in place), then the friction pass once
-  // when `friction_after`; pins only in the whole-substep call (the loop below runs its own)
-  auto device_passes = [&](float* x, int count, bool friction_after, bool whole) {
-    opencl::IterationSizes size;
-    size.n = n;
-    size.pair_entries = g.nbr_offsets ? neighbors_.indices.size() : 0;
-    size.plane_entries = g.plane_offsets ? plane_offsets_[n] : 0;
-    size.prims = g.con_offsets ? d.prim_count : 0;
-    size.row_length = row_length_;
-    gr_grains gd = g;
-    if (!whole) gd.targetP = nullptr;
-    device_.device->run(gd, prm, size, x, acc, count,
-                        whole ? friction_pass : friction_after,
-                        whole ? s.accurate_friction : false);
-  };
-  auto run_friction = [&] {
-    const float* p = p_.data();
-    float* next = p_next_.data();
-    if (device) {
-      std::copy(p_.begin(), p_.end(), p_next_.begin());
-      device_passes(next, 0, true, false);
-    } else {
-#pragma omp parallel for schedule(static) num_threads(threads)
-      for (long i = 0; i < ln; ++i) {
-        int ii = static_cast<int>(i);
-        gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
-      }
-    }
-    p_.swap(p_next_);
-    if (shapes_on) project_shapes(g, prm, threads);  // friction moved grains one by one
-  };
-  const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
-  float omega = 1.0f;
-  if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
-  const bool device_whole = device && !shapes_on && !chebyshev &&
-                            !s.update_neighbors_during_iterations &&
-                            !s.update_collisions_during_iterations;
-  if (device_whole) device_passes(p_.data(), iterations, false, true);
-  for (int it = 0; it < iterations && !device_whole; ++it) {
-    if (it > 0 && pairs_on && s.update_neighbors_during_iterations) find_pairs(false);
-    if (it > 0 && colliders_on && s.update_collisions_during_iterations) planes(false);
-    const float* p = p_.data();
-    // Chebyshev: the result overwrites the iterate before p_, which only grain i reads, for i
-    float* next = chebyshev ? p_before_.data() : p_next_.data();
-    omega = chebyshev ? gr_chebyshev_omega(it, s.chebyshev_rho, omega) : 1.0f;
-    const float om = omega;
-    if (device) {
-      // the iteration on the device into p_next_, the Chebyshev step here
-      std::copy(p_.begin(), p_.end(), p_next_.begin());
-      device_passes(p_next_.data(), 1, false, false);
-      const float* x_hat = p_next_.data();
-      if (om != 1.0f) {
-#pragma omp parallel for schedule(static) num_threads(threads)
-        for (long i = 0; i < ln; ++i) {
-          const int ii = static_cast<int>(i);
-          gr_store3(next, ii, gr_chebyshev(gr_load3(x_hat, ii), gr_load3(next, ii), om));
-        }
-      } else if (next != x_hat) {
-        std::copy(p_next_.begin(), p_next_.end(), p_before_.begin());
-      }
-    } else {
-#pragma omp parallel num_threads(threads)
-      {
-        gr_normal_sums mine = acc;  // this thread's row scratch
-        if (mine.pair_iteration) mine.pair_iteration += row_stride_ * size_t(omp_get_thread_num());
-        // static: a thread takes the same grains every iteration, so the positions it reads were
-        // mostly written by itself and stay in its core's cache (with chunks handed out as they
-        // come, half the reads fetched lines the other core had just written)
-#pragma omp for schedule(static)
-        for (long i = 0; i < ln; ++i) {
-          int ii = static_cast<int>(i);
-          gr_float3 x = gr_iterate(&g, &prm, p, ii, &mine);
-          if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
-          gr_store3(next, ii, x);
-        }
-      }
-    }
-    (chebyshev ? p_before_ : p_next_).swap(p_);
-    if (shapes_on) project_shapes(g, prm, threads);
-    if (friction_pass && s.accurate_friction) run_friction();
-    if (g.targetP) project_pins();  // once an iteration, last
-  }
-  if (friction_pass && !s.accurate_friction && !device_whole) run_friction();
+  // 3. Jacobi iterations, friction, pins
+  iterate(c);
 
   // 4. velocity, drift, final collisions; write P and v (and the impact data)
   write_back(d, s, g, prm, colliders, collider_count, origin, impacts, threads);
@@ -1022,6 +831,268 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // stats: serial, in a fixed order
   if (stats && pairs_on) contact_stats(d, stats);
+}
+
+bool GrainsSolver::keep_rows(const SubstepContext& c) const {
+  const size_t n = n_;
+  const GrainsSettings& s = c.s;
+  if (!c.reusable || !rows_valid_ || rows_ids_.size() != n || !(rows_skin_ > 0)) return false;
+  if (rows_query_scale_ != s.neighbor_query_scale || rows_max_ != s.max_neighbors ||
+      rows_uniform_ != s.assume_uniform_radius)
+    return false;
+  for (size_t i = 0; i < n; ++i)
+    if (rows_ids_[i] != grain_id(c.d, i) || rows_radius_[i] != radius_[i]) return false;
+  const float* p = p_.data();
+  const float* b = rows_p_.data();
+  const long ln = static_cast<long>(n);
+  float moved2 = 0;
+#pragma omp parallel for schedule(static) num_threads(c.threads) reduction(max : moved2)
+  for (long i = 0; i < ln; ++i) {
+    const float x = p[3 * i] - b[3 * i], y = p[3 * i + 1] - b[3 * i + 1],
+                z = p[3 * i + 2] - b[3 * i + 2];
+    moved2 = std::max(moved2, x * x + y * y + z * z);
+  }
+  return std::sqrt(moved2) < 0.25f * rows_skin_;
+}
+
+void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
+  const size_t n = n_;
+  const long ln = static_cast<long>(n);
+  const int threads = c.threads;
+  gr_grains& g = c.g;
+  if (!first && c.pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
+  // The friction pass's per-entry sums and the search's list store are about the same size
+  // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
+  // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
+  // carry the sums over and use the search's own store.
+  if (first && keep_rows(c)) {
+    c.same_rows = true;
+  } else {
+    // the contact history's lookup reads last substep's rows
+    if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
+    search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
+                 first && c.pair_friction_pass ? &pair_normal_ : nullptr);
+    rows_valid_ = false;
+    if (first && c.reusable) remember_rows(c.d, c.s, c.search_radius, threads);
+  }
+  // mutually constrained grains that do not collide: drop their pairs once here rather than
+  // look each one up in every iteration; rows keep their order and their max_neighbors cut
+  if (c.constraints_on && !c.s.collide_mutually_constrained_particles) {
+    drop_constrained_pairs(threads);
+    g.nbr_unconstrained = 1;
+  }
+  g.nbr_offsets = neighbors_.offsets.data();
+  g.nbr_indices = neighbors_.indices.data();
+  if (!c.pair_friction_pass) return;
+  const size_t entries = neighbors_.indices.size();
+  size_t longest = 0;
+  for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
+  // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
+  row_length_ = (std::max<size_t>(longest, 1) + GR_LANES - 1) / GR_LANES * GR_LANES;
+  // each thread's row a whole number of cache lines apart from the next one's, plus a line:
+  // threads writing one line between them every grain would pass it back and forth
+  row_stride_ = (row_length_ + 15) / 16 * 16 + 16;
+  pair_normal_it_.resize(row_stride_ * size_t(threads));
+  if (first) {
+    pair_normal_.assign(entries, 0u);  // the bits of 0.0f
+  } else {
+    // carry each pair's accumulated overlap over to its slot in the rebuilt rows
+    std::vector<uint32_t> old;
+    old.swap(pair_normal_);
+    pair_normal_.assign(entries, 0u);
+    std::vector<float> old_slip;
+    old_slip.swap(pair_slip_);
+    pair_slip_.assign(3 * entries, 0.0f);
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long i = 0; i < ln; ++i)
+      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
+        for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
+          if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
+            pair_normal_[k] = old[m];
+            std::copy_n(&old_slip[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
+            break;
+          }
+    g.pair_slip = pair_slip_.data();
+  }
+  c.acc.pair_iteration = pair_normal_it_.data();
+  c.acc.pair = pair_normal_.data();
+}
+
+// Collider planes. What the iterations accumulate per plane follows its collider through a
+// rebuild during the iterations, not its place in the nearest-first row (two planes swap when
+// the iterations push a grain nearer the second): the friction pass's sums, per plane entry,
+// and the impact data's applied corrections, per slot. A collider the rebuilt row no longer
+// holds takes its sums with it.
+void GrainsSolver::update_planes(SubstepContext& c, bool first) {
+  const size_t n = n_;
+  const long ln = static_cast<long>(n);
+  gr_grains& g = c.g;
+  const bool friction = c.collider_friction_pass;
+  const bool carry = !first && (friction || c.impacts);
+  std::vector<float> old_slip;
+  if (carry) {
+    prev_plane_offsets_.swap(plane_offsets_);
+    prev_plane_collider_.swap(plane_collider_);
+    if (friction) prev_collider_normal_.swap(collider_normal_);
+    if (friction) old_slip.swap(plane_slip_);
+  }
+  find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
+              c.threads);
+  g.plane_offsets = plane_offsets_.data();
+  g.plane = plane_.data();
+  if (friction) {
+    collider_normal_.assign(plane_offsets_[n], 0.0f);
+    c.acc.collider = collider_normal_.data();
+  }
+  if (!carry) return;
+  if (friction) {
+    plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+    g.plane_slip = plane_slip_.data();
+  }
+  const bool impacts = c.impacts;
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+  for (long i = 0; i < ln; ++i) {
+    constexpr int K = GR_MAX_PLANES;
+    float dx[3 * K];
+    float* slots = impacts ? collider_dx_.data() + 3 * K * i : nullptr;
+    if (slots) {
+      std::copy(slots, slots + 3 * K, dx);
+      std::fill(slots, slots + 3 * K, 0.0f);
+    }
+    const uint32_t b = plane_offsets_[i], pb = prev_plane_offsets_[i];
+    for (uint32_t e = b; e < plane_offsets_[i + 1]; ++e)
+      for (uint32_t m = pb; m < prev_plane_offsets_[i + 1]; ++m) {
+        if (prev_plane_collider_[m] != plane_collider_[e]) continue;
+        if (friction) {
+          collider_normal_[e] = prev_collider_normal_[m];
+          std::copy_n(&old_slip[3 * size_t(m)], 3, &plane_slip_[3 * size_t(e)]);
+        }
+        if (slots) std::copy(dx + 3 * (m - pb), dx + 3 * (m - pb + 1), slots + 3 * (e - b));
+        break;
+      }
+  }
+}
+
+// pins: their own group, after the averaged update and the shapes (kernels/pin.h)
+void GrainsSolver::project_pins(SubstepContext& c) {
+  float* p = p_.data();
+  const long ln = static_cast<long>(n_);
+  const gr_grains& g = c.g;
+  const gr_params& prm = c.prm;
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+  for (long i = 0; i < ln; ++i) gr_store3(p, i, gr_project_pin(&g, &prm, p, static_cast<int>(i)));
+}
+
+// use_opencl (opencl/iterations.h): one device call of `count` iterations on x (in place), then
+// the friction pass once when `friction_after`; pins only in the whole-substep call (`whole`:
+// the iterations' loop runs its own otherwise)
+void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool friction_after,
+                                 bool whole) {
+  const size_t n = n_;
+  opencl::IterationSizes size;
+  size.n = n;
+  size.pair_entries = c.g.nbr_offsets ? neighbors_.indices.size() : 0;
+  size.plane_entries = c.g.plane_offsets ? plane_offsets_[n] : 0;
+  size.prims = c.g.con_offsets ? c.d.prim_count : 0;
+  size.row_length = row_length_;
+  gr_grains gd = c.g;
+  if (!whole) gd.targetP = nullptr;
+  const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
+  device_.device->run(gd, c.prm, size, x, c.acc, count, whole ? friction_pass : friction_after,
+                      whole ? c.s.accurate_friction : false);
+}
+
+// the friction pass (gr_friction_pass) on every grain, p_ to p_ (through p_next_)
+void GrainsSolver::run_friction(SubstepContext& c) {
+  const float* p = p_.data();
+  float* next = p_next_.data();
+  const long ln = static_cast<long>(n_);
+  if (c.s.use_opencl) {
+    std::copy(p_.begin(), p_.end(), p_next_.begin());
+    device_passes(c, next, 0, true, false);
+  } else {
+    const gr_grains& g = c.g;
+    const gr_params& prm = c.prm;
+    const gr_normal_sums& acc = c.acc;
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+    for (long i = 0; i < ln; ++i) {
+      int ii = static_cast<int>(i);
+      gr_store3(next, ii, gr_friction_pass(&g, &prm, p, &acc, ii));
+    }
+  }
+  p_.swap(p_next_);
+  if (c.shapes_on) project_shapes(c.g, c.prm, c.threads);  // friction moved grains one by one
+}
+
+// The Jacobi iterations (gr_iterate), with rebuilds of the rows and planes during them, the
+// shapes, the friction pass (after every iteration with accurate friction, else once after the
+// loop) and the pins; friction is its own pass, never inside the contact gather. With use_opencl
+// the device runs the grain loops: with nothing between them on the host (no shape matching, no
+// rebuild during the iterations, no Chebyshev step) every pass of the substep is one call;
+// otherwise each pass is a call of its own and the host does the rest between them, as here.
+void GrainsSolver::iterate(SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  const long ln = static_cast<long>(n_);
+  const int threads = c.threads, iterations = c.iterations;
+  const gr_grains& g = c.g;
+  const gr_params& prm = c.prm;
+  const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
+  const bool device = s.use_opencl;
+  if (device && !device_.device) device_.device = std::make_unique<opencl::Iterations>();
+  const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
+  float omega = 1.0f;
+  if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
+  const bool device_whole = device && !c.shapes_on && !chebyshev &&
+                            !s.update_neighbors_during_iterations &&
+                            !s.update_collisions_during_iterations;
+  if (device_whole) device_passes(c, p_.data(), iterations, false, true);
+  for (int it = 0; it < iterations && !device_whole; ++it) {
+    if (it > 0 && c.pairs_on && s.update_neighbors_during_iterations) find_pairs(c, false);
+    if (it > 0 && c.colliders_on && s.update_collisions_during_iterations) update_planes(c, false);
+    const float* p = p_.data();
+    // Chebyshev: the result overwrites the iterate before p_, which only grain i reads, for i
+    float* next = chebyshev ? p_before_.data() : p_next_.data();
+    omega = chebyshev ? gr_chebyshev_omega(it, s.chebyshev_rho, omega) : 1.0f;
+    const float om = omega;
+    if (device) {
+      // the iteration on the device into p_next_, the Chebyshev step here
+      std::copy(p_.begin(), p_.end(), p_next_.begin());
+      device_passes(c, p_next_.data(), 1, false, false);
+      const float* x_hat = p_next_.data();
+      if (om != 1.0f) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+        for (long i = 0; i < ln; ++i) {
+          const int ii = static_cast<int>(i);
+          gr_store3(next, ii, gr_chebyshev(gr_load3(x_hat, ii), gr_load3(next, ii), om));
+        }
+      } else if (next != x_hat) {
+        std::copy(p_next_.begin(), p_next_.end(), p_before_.begin());
+      }
+    } else {
+      const gr_normal_sums& acc = c.acc;
+      const size_t stride = row_stride_;
+#pragma omp parallel num_threads(threads)
+      {
+        gr_normal_sums mine = acc;  // this thread's row scratch
+        if (mine.pair_iteration) mine.pair_iteration += stride * size_t(omp_get_thread_num());
+        // static: a thread takes the same grains every iteration, so the positions it reads were
+        // mostly written by itself and stay in its core's cache (with chunks handed out as they
+        // come, half the reads fetched lines the other core had just written)
+#pragma omp for schedule(static)
+        for (long i = 0; i < ln; ++i) {
+          int ii = static_cast<int>(i);
+          gr_float3 x = gr_iterate(&g, &prm, p, ii, &mine);
+          if (om != 1.0f) x = gr_chebyshev(x, gr_load3(next, ii), om);
+          gr_store3(next, ii, x);
+        }
+      }
+    }
+    (chebyshev ? p_before_ : p_next_).swap(p_);
+    if (c.shapes_on) project_shapes(g, prm, threads);
+    if (friction_pass && s.accurate_friction) run_friction(c);
+    if (g.targetP) project_pins(c);  // once an iteration, last
+  }
+  if (friction_pass && !s.accurate_friction && !device_whole) run_friction(c);
 }
 
 // Rigid shape matching's components: the connected components of the 2-point primitives

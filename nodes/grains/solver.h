@@ -165,7 +165,19 @@ class GrainsSolver {
                   bool impacts, int threads);
   void contact_stats(const GrainsData& d, GrainsStats* stats) const;
 
-  // Verlet reuse of the neighbour rows across substeps (substep(): keep_rows)
+  // the neighbour rows and collider planes (first: at the substep's start; otherwise a rebuild
+  // during the iterations, carrying what they accumulated), the iterations with their friction
+  // passes and pins: stages over one substep's context (solver.cpp)
+  struct SubstepContext;
+  bool keep_rows(const SubstepContext& c) const;
+  void find_pairs(SubstepContext& c, bool first);
+  void update_planes(SubstepContext& c, bool first);
+  void iterate(SubstepContext& c);
+  void run_friction(SubstepContext& c);
+  void project_pins(SubstepContext& c);
+  void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole);
+
+  // Verlet reuse of the neighbour rows across substeps (keep_rows)
   void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
                      int threads);
 

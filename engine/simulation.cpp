@@ -157,6 +157,7 @@ int motion_substeps(const ParticleStore& pts, double fps, int most) {
   const int32_t* pbd = pts.i_if("ispbd");
   if (!P || !v || !r || !pbd) return 1;
   double worst = 1;
+  double fall = 0;  // the largest acc / r
   for (size_t k = 0; k < pts.size(); ++k) {
     const double half = 0.5 * r[k];
     if (!pbd[k] || !(half > 0)) continue;
@@ -167,9 +168,10 @@ int motion_substeps(const ParticleStore& pts, double fps, int most) {
                              : (speed > 0 ? half / speed : 0.0);
     if (!(x > 0) || !std::isfinite(x)) continue;
     worst = std::max(worst, 1.0 / (fps * x));
-    // the fall from rest in one substep, acc dt^2, at most kRestingFall r
-    if (acc > 0) worst = std::max(worst, std::sqrt(acc / (kRestingFall * r[k])) / fps);
+    fall = std::max(fall, acc / r[k]);
   }
+  // the fall from rest in one substep, acc dt^2, at most kRestingFall r
+  worst = std::max(worst, std::sqrt(fall / kRestingFall) / fps);
   return static_cast<int>(std::min<double>(most, std::ceil(worst)));
 }
 

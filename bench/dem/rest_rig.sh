@@ -3,7 +3,8 @@
 # to the end of its pour (frame 96, velocities kept), loaded as a source and run on to frame 119
 # with the settings given, then the DEM collapse with the same settings. Prints the heap (grains
 # heap) and the last frame's kinetic energy, and the collapse's run-out and H/L0 (the DEM
-# reference's metrics.py): the heap slumps from about 59 deg where its friction is too weak.
+# reference's metrics.py). The pour's end measures about 59 deg only because the falling stream
+# still counts; once it has landed the heap stands at 46-48 deg and ends near 44 (docs/heap-angle.md).
 #   bash bench/dem/rest_rig.sh [OUT] [--set NODE.PARAM=VALUE ...]   (from the repository root)
 set -euo pipefail
 cd "$(dirname "$0")/../.."

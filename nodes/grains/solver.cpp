@@ -628,32 +628,88 @@ struct GrainsSolver::SubstepContext {
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
-  const size_t n = d.n;
-  if (n == 0) return;
-  const long ln = static_cast<long>(n);
-  const int threads = s.threads > 0 ? s.threads : omp_get_max_threads();
-  const int iterations = std::max(0, s.constraint_iterations);
+  if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
-  // the substep's coordinates: world positions minus `origin` (local_origin; 0 near the origin)
-  const Vec3 origin = local_origin(d.P, n, threads);
-  const bool shifted = !(origin.x == 0 && origin.y == 0 && origin.z == 0);
+  gr_grains g;
+  std::memset(&g, 0, sizeof g);
   gr_params prm = make_params(s);
+  gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr, nullptr};
+  SubstepContext c(d, s, colliders, collider_count, g, prm, acc);
+  c.threads = s.threads > 0 ? s.threads : omp_get_max_threads();
+  c.iterations = std::max(0, s.constraint_iterations);
+
+  // the kernels' inputs: per-grain arrays, pins, shapes, explicit constraints
+  bind_inputs(c);
+
+  // 1. predict
+  predict(c);
+  open_sums(c);
+
+  // 2. neighbour candidates and collider planes from the predicted positions
+  open_search(c);
+  if (c.pairs_on) find_pairs(c, true);
+  if (c.colliders_on) update_planes(c, true);
+  // contact history (load_history): each contact's slip left from earlier substeps
+  const bool history = c.pair_friction_pass || c.collider_friction_pass;
+  if (history) {
+    load_history(d, c.pair_friction_pass, c.collider_friction_pass, c.same_rows, c.threads);
+    if (c.pair_friction_pass) g.pair_slip = pair_slip_.data();
+    if (c.collider_friction_pass) g.plane_slip = plane_slip_.data();
+  }
+
+  // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
+  // removed from the start and predicted positions alike, without velocity
+  if (s.pre_stabilization && ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
+    pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads);
+    g.P = P_stable_.data();
+  }
+
+  // 3. Jacobi iterations, friction, pins
+  iterate(c);
+
+  // 4. velocity, drift, final collisions; write P and v (and the impact data)
+  write_back(d, s, g, prm, colliders, collider_count, c.origin, c.impacts, c.threads);
+
+  if (history)
+    save_history(d, s, g, prm, p_.data(), c.pair_friction_pass, c.collider_friction_pass, c.threads);
+  else
+    hist_id_.clear(), hist_slip_.clear();
+
+  // 5. strain, breaking, strands
+  if (c.constraints_on) update_constraints(d, s, c.threads, stats);
+
+  // stats: serial, in a fixed order
+  if (stats && c.pairs_on) contact_stats(d, stats);
+}
+
+// The substep's coordinates (world positions minus c.origin, local_origin: 0 near the origin)
+// and what the kernels read there (c.g, c.prm): start positions, radius, mass, inverse mass (or
+// 1/shockmass), attributes, pins, rigid shapes and explicit constraints; the caller's arrays
+// where they serve as they are, copies otherwise (freed when no longer needed).
+void GrainsSolver::bind_inputs(SubstepContext& c) {
+  GrainsData& d = c.d;
+  const GrainsSettings& s = c.s;
+  gr_grains& g = c.g;
+  gr_params& prm = c.prm;
+  const int threads = c.threads;
+  const size_t n = d.n;
+  const long ln = static_cast<long>(n);
+  const Vec3 origin = local_origin(d.P, n, threads);
+  c.origin = origin;
+  const bool shifted = !(origin.x == 0 && origin.y == 0 && origin.z == 0);
   prm.shock_origin_x -= origin.x;
   prm.shock_origin_y -= origin.y;
   prm.shock_origin_z -= origin.z;
 
-  // per-grain inputs the kernels read: start positions, radius, mass, inverse mass (or
-  // 1/shockmass)
   // explicit constraints: weight 0 skips them entirely (no adjacency, no strain, no breaking)
-  const bool constraints_on =
+  c.constraints_on =
       s.explicit_constraints_weight > 0 && d.prim_count > 0 && d.prim_points && d.restlength;
   n_ = n;
   inv_mass_.resize(n);
-  // the caller's arrays where they serve as they are; copies free their memory when not needed
   auto drop = [](std::vector<float>& v) {
     if (v.capacity()) std::vector<float>().swap(v);
   };
-  if (shifted || constraints_on) {
+  if (shifted || c.constraints_on) {
     P0_copy_.resize(3 * n);
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) store3(P0_copy_.data(), i, load3(d.P, i) - origin);
@@ -691,11 +747,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // pairs are needed for contacts or clumping; weight 0 for both skips neighbour search and the
   // pair loop entirely
-  const bool pairs_on = s.internal_collisions_weight > 0 || s.clumping_weight > 0;
-  const bool colliders_on = collider_count > 0;
+  c.pairs_on = s.internal_collisions_weight > 0 || s.clumping_weight > 0;
+  c.colliders_on = c.collider_count > 0;
 
-  gr_grains g;
-  std::memset(&g, 0, sizeof g);
   g.P = P0_;
   g.v = d.v;
   g.force = d.force;
@@ -730,11 +784,11 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 
   // rigid shape matching: its components and rest shapes (build_shapes)
-  const bool shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
-  if (shapes_on) build_shapes(d);
+  c.shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
+  if (c.shapes_on) build_shapes(d);
 
-  // explicit constraints (constraints_on above)
-  if (constraints_on) {
+  // explicit constraints (c.constraints_on above)
+  if (c.constraints_on) {
     build_constraints(d);
     g.con_offsets = con_offsets_.data();
     g.con_other = con_other_.data();
@@ -743,48 +797,51 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     g.constraintweight = d.constraintweight;
     g.constraintstiffness = d.constraintstiffness;
   }
+}
 
-  // 1. predict
+// step 1: each grain's predicted position p_ (gr_predict)
+void GrainsSolver::predict(SubstepContext& c) {
+  const size_t n = n_;
+  const long ln = static_cast<long>(n);
   // one float past the last grain: the contact loop loads positions 4 floats at a time
   p_.resize(3 * n + 1);
   p_next_.resize(3 * n + 1);
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < ln; ++i) gr_predict(&g, &prm, p_.data(), static_cast<int>(i));
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+  for (long i = 0; i < ln; ++i) gr_predict(&c.g, &c.prm, p_.data(), static_cast<int>(i));
+}
 
-  // friction (gr_friction_pass): once after the loop, or after every iteration with accurate
-  // friction, bounded by the normal corrections each contact applied, summed over the iterations
-  const bool pair_friction_pass =
-      pairs_on && s.internal_collisions_weight > 0 && s.friction_with_particles > 0;
-  const bool collider_friction_pass = colliders_on && s.friction_with_colliders > 0;
-  gr_normal_sums acc{nullptr, nullptr, nullptr, nullptr, nullptr};
-  if (s.accurate_friction && (pair_friction_pass || collider_friction_pass)) {
+// Which friction passes run, and the sums the iterations keep for them and the impact data
+// (c.acc). Friction (gr_friction_pass): once after the loop, or after every iteration with
+// accurate friction, bounded by the normal corrections each contact applied, summed over the
+// iterations.
+void GrainsSolver::open_sums(SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  const size_t n = n_;
+  c.pair_friction_pass =
+      c.pairs_on && s.internal_collisions_weight > 0 && s.friction_with_particles > 0;
+  c.collider_friction_pass = c.colliders_on && s.friction_with_colliders > 0;
+  if (s.accurate_friction && (c.pair_friction_pass || c.collider_friction_pass)) {
     friction_dx_.assign(3 * n, 0.0f);
-    acc.friction_dx = friction_dx_.data();
+    c.acc.friction_dx = friction_dx_.data();
   }
-  const bool impacts = d.impact_impulse && colliders_on;
-  if (impacts) {
+  c.impacts = c.d.impact_impulse && c.colliders_on;
+  if (c.impacts) {
     collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
-    acc.collider_dx = collider_dx_.data();
+    c.acc.collider_dx = collider_dx_.data();
   }
+}
 
-  // 2. neighbour candidates and collider planes from the predicted positions
-  SubstepContext c(d, s, colliders, collider_count, g, prm, acc);
-  c.origin = origin;
-  c.threads = threads;
-  c.iterations = iterations;
-  c.pairs_on = pairs_on;
-  c.colliders_on = colliders_on;
-  c.constraints_on = constraints_on;
-  c.shapes_on = shapes_on;
-  c.pair_friction_pass = pair_friction_pass;
-  c.collider_friction_pass = collider_friction_pass;
-  c.impacts = impacts;
+// The neighbour search's settings (c.q, c.search_radius) and whether its rows may be kept
+// across substeps (c.reusable).
+void GrainsSolver::open_search(SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  const size_t n = n_;
   // assume_uniform_radius: one grid cell size and every grain searched as the largest one, a
   // superset of the true candidates. With equal radii that is the same set, found faster; with
   // mixed radii small grains gather farther candidates and max_neighbors fills with them, so the
   // toggle is for scenes whose grains share one size (help page "Assume Uniform Radius").
   c.search_radius = radius_;
-  if (s.assume_uniform_radius && !(g.uniform_radius > 0)) {  // equal radii need no copy
+  if (s.assume_uniform_radius && !(c.g.uniform_radius > 0)) {  // equal radii need no copy
     float r_max = 0;
     for (size_t i = 0; i < n; ++i) r_max = std::max(r_max, radius_[i]);
     search_radius_.assign(n, r_max);
@@ -793,44 +850,12 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   c.q.query_scale = s.neighbor_query_scale;
   c.q.max_neighbors = s.max_neighbors;
   c.q.uniform_radius = s.assume_uniform_radius;
-  c.q.threads = threads;
+  c.q.threads = c.threads;
   // Verlet reuse (keep_rows): the rows of the last substep still hold every pair that can touch
   // in this one when the grains are the same, in the same order, and none has moved more than
   // a quarter of the rows' skin since they were built (see rows_skin_)
-  c.reusable = !(s.clumping_weight > 0) && !constraints_on && !s.update_neighbors_during_iterations;
-  if (pairs_on) find_pairs(c, true);
-  if (colliders_on) update_planes(c, true);
-  // contact history (load_history): each contact's slip left from earlier substeps
-  const bool history = pair_friction_pass || collider_friction_pass;
-  if (history) {
-    load_history(d, pair_friction_pass, collider_friction_pass, c.same_rows, threads);
-    if (pair_friction_pass) g.pair_slip = pair_slip_.data();
-    if (collider_friction_pass) g.plane_slip = plane_slip_.data();
-  }
-
-  // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
-  // removed from the start and predicted positions alike, without velocity
-  if (s.pre_stabilization && ((pairs_on && s.internal_collisions_weight > 0) || colliders_on)) {
-    pre_stabilize(g, prm, s.internal_collisions_weight > 0, iterations, threads);
-    g.P = P_stable_.data();
-  }
-
-  // 3. Jacobi iterations, friction, pins
-  iterate(c);
-
-  // 4. velocity, drift, final collisions; write P and v (and the impact data)
-  write_back(d, s, g, prm, colliders, collider_count, origin, impacts, threads);
-
-  if (history)
-    save_history(d, s, g, prm, p_.data(), pair_friction_pass, collider_friction_pass, threads);
-  else
-    hist_id_.clear(), hist_slip_.clear();
-
-  // 5. strain, breaking, strands
-  if (constraints_on) update_constraints(d, s, threads, stats);
-
-  // stats: serial, in a fixed order
-  if (stats && pairs_on) contact_stats(d, stats);
+  c.reusable =
+      !(s.clumping_weight > 0) && !c.constraints_on && !s.update_neighbors_during_iterations;
 }
 
 bool GrainsSolver::keep_rows(const SubstepContext& c) const {

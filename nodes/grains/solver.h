@@ -165,10 +165,15 @@ class GrainsSolver {
                   bool impacts, int threads);
   void contact_stats(const GrainsData& d, GrainsStats* stats) const;
 
-  // the neighbour rows and collider planes (first: at the substep's start; otherwise a rebuild
-  // during the iterations, carrying what they accumulated), the iterations with their friction
-  // passes and pins: stages over one substep's context (solver.cpp)
+  // stages over one substep's context (solver.cpp): the kernels' inputs, the prediction, the
+  // sums and search settings the substep opens with, the neighbour rows and collider planes
+  // (first: at the substep's start; otherwise a rebuild during the iterations, carrying what they
+  // accumulated), the iterations with their friction passes and pins
   struct SubstepContext;
+  void bind_inputs(SubstepContext& c);
+  void predict(SubstepContext& c);
+  void open_sums(SubstepContext& c);
+  void open_search(SubstepContext& c);
   bool keep_rows(const SubstepContext& c) const;
   void find_pairs(SubstepContext& c, bool first);
   void update_planes(SubstepContext& c, bool first);

@@ -45,10 +45,24 @@ std::vector<Override> common_overrides(const LawSettings& s, const std::string& 
   return {parse_override(source + ".separation=" + num(s.d, 9)),
           parse_override("grains.particle_separation=" + num(s.d, 9)),
           parse_override("solver.substeps=" + std::to_string(s.substeps)),
-          // the plan's settings are fixed: error control would pick its own substeps
-          parse_override("solver.error_control=0"),
+          // fixed settings: error control would pick its own substeps
+          parse_override(std::string("solver.error_control=") + (s.error_control ? "1" : "0")),
           parse_override("grains.constraint_iterations=" + std::to_string(s.iterations)),
           parse_override("grains.friction_with_particles=" + num(s.friction, 9))};
+}
+
+// "8x40", or "defaults" for the node defaults with error control
+std::string solver_tag(const LawSettings& s) {
+  return s.error_control ? std::string("defaults")
+                         : std::to_string(s.substeps) + "x" + std::to_string(s.iterations);
+}
+
+// the solver setting as a sentence, for the report's method lines
+std::string solver_sentence(const LawSettings& s) {
+  if (s.error_control)
+    return "the node defaults (" + std::to_string(s.iterations) +
+           " iterations, error control picking the substeps)";
+  return std::to_string(s.substeps) + " substeps x " + std::to_string(s.iterations) + " iterations";
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -389,7 +403,7 @@ ValidationPlan validation_plan(bool quick) {
     p.frictions = {0.2, 0.5, 1.0};
     p.pile = {10, 12, 6, 0.45, 0.3, 96};
   } else {
-    p.solver_settings = {{8, 40}, {4, 20}};
+    p.solver_settings = {{0, 0}, {8, 40}};
     p.aspects = {0.5, 1, 2, 4};
     p.column_radius_grains = 10;
     p.orifices = {5, 6, 7, 8, 9};
@@ -435,7 +449,7 @@ std::string csv_field(const std::string& s) {
 }
 
 std::string settings_text(const LawSettings& s, const std::string& extra) {
-  return std::to_string(s.substeps) + "x" + std::to_string(s.iterations) + " d=" + num(s.d) +
+  return solver_tag(s) + " d=" + num(s.d) +
          " mu=" + num(s.friction) + (extra.empty() ? "" : " " + extra);
 }
 
@@ -475,10 +489,10 @@ int run_validation(const ValidationOptions& o) {
   if (want("repose")) load_graph(pile_scene);
   ValidationPlan plan = validation_plan(o.quick);
   if (o.substeps > 0 || o.iterations > 0) {
-    auto [ss, it] = plan.solver_settings.front();
-    plan.solver_settings = {
-        {o.substeps > 0 ? o.substeps : ss, o.iterations > 0 ? o.iterations : it}};
+    // fixed settings; a value not given is the fixed reference's (8 x 40)
+    plan.solver_settings = {{o.substeps > 0 ? o.substeps : 8, o.iterations > 0 ? o.iterations : 40}};
   }
+  if (o.defaults) plan.solver_settings = {{0, 0}};
   if (o.friction >= 0) plan.settings.friction = o.friction;
   int threads =
       o.threads > 0 ? o.threads : static_cast<int>(std::max(1L, sysconf(_SC_NPROCESSORS_ONLN)));
@@ -496,9 +510,10 @@ int run_validation(const ValidationOptions& o) {
 
   for (auto [substeps, iterations] : plan.solver_settings) {
     LawSettings s = plan.settings;
-    s.substeps = substeps;
-    s.iterations = iterations;
-    std::string tag = std::to_string(substeps) + "x" + std::to_string(iterations);
+    s.error_control = substeps == 0 && iterations == 0;
+    s.substeps = s.error_control ? 1 : substeps;  // the solver's and node's defaults
+    s.iterations = s.error_control ? 10 : iterations;
+    std::string tag = solver_tag(s);
 
     if (want("collapse")) {
       std::vector<CollapseResult> runs;
@@ -557,8 +572,8 @@ int run_validation(const ValidationOptions& o) {
       detail
           << "### Column collapse, " << tag << "\n\n"
           << "`" << collapse_scene << "`, R0 = " << plan.column_radius_grains
-          << " d, d = " << num(s.d) << " m, " << s.substeps << " substeps x " << s.iterations
-          << " iterations, friction " << num(s.friction) << ".\n\n"
+          << " d, d = " << num(s.d) << " m, " << solver_sentence(s) << ", friction "
+          << num(s.friction) << ".\n\n"
           << "| a | grains | R0 (m) | R0 measured, frame 1 (m) | R_inf (m) | R_inf 0.25 s earlier "
              "(m) | run-out | Lube 2004 | Lajeunesse 2004 | H_inf/R0 | frames | wall s |\n"
           << "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
@@ -624,8 +639,8 @@ int run_validation(const ValidationOptions& o) {
           "max |second half - first half| / rate", 0, worst);
       detail << "### Silo discharge, " << tag << "\n\n"
              << "`" << silo_scene << "`, silo " << plan.silo.width_grains << " d square, filled "
-             << plan.silo.fill_grains << " d high, d = " << num(s.d) << " m, " << s.substeps
-             << " substeps x " << s.iterations << " iterations, friction " << num(s.friction)
+             << plan.silo.fill_grains << " d high, d = " << num(s.d) << " m, "
+             << solver_sentence(s) << ", friction " << num(s.friction)
              << "; rate fitted over t = " << num(plan.silo.t_start) << " to "
              << num(plan.silo.t_end) << " s.\n\n"
              << "| D/d | grains | rate (grains/s) | first half | second half | count fit r2 | n_b "
@@ -701,7 +716,7 @@ int run_validation(const ValidationOptions& o) {
         row.difference = worst;
         row.seconds = 0;
         row.settings =
-            std::to_string(s.substeps) + "x" + std::to_string(s.iterations) + " " + pile_text;
+            solver_tag(s) + " " + pile_text;
         rows.push_back(row);
       }
       LawRow row;
@@ -715,11 +730,11 @@ int run_validation(const ValidationOptions& o) {
       row.difference = row.ours - 1;
       row.seconds = secs;
       row.settings =
-          std::to_string(s.substeps) + "x" + std::to_string(s.iterations) + " " + pile_text;
+          solver_tag(s) + " " + pile_text;
       rows.push_back(row);
       detail << "### Angle of repose, " << tag << "\n\n"
              << "`" << pile_scene << "`, " << pile_text << "; d = " << num(s.d) << " m, "
-             << s.substeps << " substeps x " << s.iterations << " iterations.\n\n"
+             << solver_sentence(s) << ".\n\n"
              << "| friction | grains | left in hopper | angle (deg) | spread over sectors (deg) | "
                 "sectors | angle 1 s earlier | height (m) | radius (m) | wall s |\n"
              << "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
@@ -785,11 +800,16 @@ CLI::App* add_validation_command(CLI::App& app, ValidationOptions& o, int argc, 
       ->check(CLI::Range(1, kMaxThreads));
   c->add_option("--only", o.only, "collapse, silo and/or repose (default: all)")
       ->check(CLI::IsMember({"collapse", "silo", "repose"}));
-  c->add_option("--substeps", o.substeps, "substeps of every run (default: the plan's)")
-      ->check(positive_number());
-  c->add_option("--iterations", o.iterations,
-                "constraint iterations of every run (default: the plan's)")
-      ->check(positive_number());
+  auto* substeps = c->add_option("--substeps", o.substeps,
+                                  "fixed substeps of every run (default: the plan's)")
+                       ->check(positive_number());
+  auto* iterations = c->add_option("--iterations", o.iterations,
+                                    "fixed constraint iterations of every run (default: the plan's)")
+                         ->check(positive_number());
+  c->add_flag("--defaults", o.defaults,
+              "every run at the node and solver defaults, error control picking the substeps")
+      ->excludes(substeps)
+      ->excludes(iterations);
   c->add_option("--friction", o.friction, "friction_with_particles of the collapse and silo runs")
       ->check(non_negative_number());
   std::string cmd;

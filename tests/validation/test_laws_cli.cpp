@@ -1,9 +1,10 @@
 // `grains-lab laws` (lab/validation.h): validation.csv with its documented header and one row per
 // law, the Markdown report, and exit code 2 for missing scenes. The physics is judged by the
 // other tests in this folder; this one runs the collapse cases at 1 substep x 5 iterations,
-// which is cheap and enough for the plumbing.
+// which is cheap and enough for the plumbing, and once at the defaults (error control on).
 #include <catch2/catch.hpp>
 #include <sstream>
+#include <vector>
 
 #include "lab/source.h"
 #include "lab/validation.h"
@@ -36,6 +37,36 @@ TEST_CASE("laws writes validation.csv and the Markdown report", "[validation][la
   // the commit CMake stamped when the lab was built (lab/source.h); the lab never runs git
   CHECK_THAT(report, Catch::Contains("- **Source:** commit `" +
                                      std::string(lab::source_commit().id) + "`"));
+}
+
+TEST_CASE("laws --defaults runs the plan at the defaults, error control on", "[validation][lab]") {
+  // the smallest column (a = 0.5, 3 layers of 6 d radius) alone would need a plan of its own;
+  // the quick collapse at the defaults takes about half a minute on one core
+  std::string dir = temp_dir("laws_defaults");
+  std::string md = dir + "/V.md";
+  REQUIRE(run_lab("laws --quick --only collapse --defaults --threads 1 --scenes " + source_dir() +
+                      "/bench/validation --out " + dir + " --md " + md,
+                  dir + "/log") == 0);
+  std::string report = read_text(md);
+  CHECK_THAT(report, Catch::Contains("### Column collapse, defaults"));
+  CHECK_THAT(report, Catch::Contains("error control picking the substeps"));
+  std::string csv = read_text(dir + "/validation.csv");
+  CHECK_THAT(csv, Catch::Contains(",defaults d=0.02 mu=0.5 R0=6d,"));
+  // The a = 1 column stands: Lube et al. 2004 find the deposit as high as the column
+  // (H_inf = H0) below a = 1.15; allowed, the top two grain layers (2 d / R0 = 1/3). One fixed
+  // substep of 10 iterations, what error control refines, crushes it to a layer (0.27).
+  const std::string row = "\n| 1 | ";
+  const size_t at = report.find(row);
+  REQUIRE(at != std::string::npos);
+  std::vector<std::string> cells;
+  std::stringstream line(report.substr(at + 1, report.find('\n', at + 1) - at - 1));
+  for (std::string cell; std::getline(line, cell, '|');) cells.push_back(cell);
+  REQUIRE(cells.size() >= 11);  // "", a, grains, R0, R0 measured, R_inf, earlier, run-out, ...
+  const double h_over_r0 = std::stod(cells[10]);
+  INFO("H_inf / R0 at a = 1: " << h_over_r0);
+  CHECK(h_over_r0 >= 1.0 - 2.0 / 6.0);
+  // fixed settings and the defaults exclude each other: a usage error
+  CHECK(run_lab("laws --quick --defaults --substeps 4 --out " + dir, dir + "/log2") == 2);
 }
 
 TEST_CASE("laws exits with 2 when a scene is missing", "[validation][lab]") {

@@ -15,10 +15,12 @@
 #include <fstream>
 #include <functional>
 #include <sstream>
+#include <stdexcept>
 
 #include "cli/options.h"
 #include "engine/dem_measures.h"
 #include "engine/graph.h"
+#include "engine/node.h"
 #include "engine/simulation.h"
 #include "lab/source.h"
 
@@ -49,6 +51,15 @@ std::vector<Override> common_overrides(const LawSettings& s, const std::string& 
           parse_override(std::string("solver.error_control=") + (s.error_control ? "1" : "0")),
           parse_override("grains.constraint_iterations=" + std::to_string(s.iterations)),
           parse_override("grains.friction_with_particles=" + num(s.friction, 9))};
+}
+
+// a node type's default for an int parameter (the registry's declaration, so that the lab's
+// "defaults" follow the nodes')
+int node_default(const std::string& type, const std::string& param) {
+  const NodeTypeInfo* info = find_node_type(type);
+  const ParamDecl* decl = info ? info->find_param(param) : nullptr;
+  if (!decl) throw std::logic_error("no parameter " + type + "." + param);
+  return static_cast<int>(decl->def[0]);
 }
 
 // "8x40", or "defaults" for the node defaults with error control
@@ -489,8 +500,10 @@ int run_validation(const ValidationOptions& o) {
   if (want("repose")) load_graph(pile_scene);
   ValidationPlan plan = validation_plan(o.quick);
   if (o.substeps > 0 || o.iterations > 0) {
-    // fixed settings; a value not given is the fixed reference's (8 x 40)
-    plan.solver_settings = {{o.substeps > 0 ? o.substeps : 8, o.iterations > 0 ? o.iterations : 40}};
+    // fixed settings; a value not given is the fixed reference's (LawSettings: 8 x 40)
+    const LawSettings fixed;
+    plan.solver_settings = {{o.substeps > 0 ? o.substeps : fixed.substeps,
+                             o.iterations > 0 ? o.iterations : fixed.iterations}};
   }
   if (o.defaults) plan.solver_settings = {{0, 0}};
   if (o.friction >= 0) plan.settings.friction = o.friction;
@@ -511,8 +524,8 @@ int run_validation(const ValidationOptions& o) {
   for (auto [substeps, iterations] : plan.solver_settings) {
     LawSettings s = plan.settings;
     s.error_control = substeps == 0 && iterations == 0;
-    s.substeps = s.error_control ? 1 : substeps;  // the solver's and node's defaults
-    s.iterations = s.error_control ? 10 : iterations;
+    s.substeps = s.error_control ? node_default("solver", "substeps") : substeps;
+    s.iterations = s.error_control ? node_default("grains", "constraint_iterations") : iterations;
     std::string tag = solver_tag(s);
 
     if (want("collapse")) {

@@ -71,8 +71,8 @@ struct LawSettings {
   double d = 0.02;  // grain diameter = source separation = particle_separation (m)
   int substeps = 8;
   int iterations = 40;
-  // the node defaults instead (1 substep at least, 10 iterations) with the solver's error
-  // control picking the substeps: the plan's (0, 0) setting
+  // the solver's and grains node's defaults instead (substeps the fewest, error control
+  // picking them each frame): the plan's (0, 0) setting
   bool error_control = false;
   double friction = 0.5;  // grains.friction_with_particles
 };

@@ -341,6 +341,8 @@ void register_grains_node() {
   // use_opencl on a machine without the device (or a GRAINS_OPENCL_DEVICE naming none) is refused
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
     if (!p.b("use_opencl")) return {"", ""};
+    if (p.choice("contact_solver") == kContactGaussSeidel)
+      return {"contact_solver gauss_seidel runs on the CPU only; turn use_opencl off", "use_opencl"};
     opencl::DeviceChoice choice;
     std::string problem;
     if (!opencl::chosen_device(&choice, &problem)) return {problem, "use_opencl"};

@@ -46,6 +46,7 @@ static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slo
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "nodes/grains/substep_context.h"
 
 namespace grains {
 namespace {
@@ -601,30 +602,6 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&)
 GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noexcept = default;
 
-// The substep's inputs and switches its stages share (substep() fills it; n is n_)
-struct GrainsSolver::SubstepContext {
-  SubstepContext(GrainsData& data, const GrainsSettings& settings, const ColliderState* cs,
-                 size_t count, gr_grains& grains, gr_params& params, gr_normal_sums& sums)
-      : d(data), s(settings), colliders(cs), collider_count(count), g(grains), prm(params),
-        acc(sums) {}
-  GrainsData& d;
-  const GrainsSettings& s;
-  const ColliderState* colliders;
-  size_t collider_count;
-  gr_grains& g;
-  gr_params& prm;
-  gr_normal_sums& acc;
-  Vec3 origin{};
-  int threads = 1;
-  int iterations = 0;
-  bool pairs_on = false, colliders_on = false, constraints_on = false, shapes_on = false;
-  bool pair_friction_pass = false, collider_friction_pass = false, impacts = false;
-  bool reusable = false;   // the neighbour rows may be kept across substeps (keep_rows)
-  bool same_rows = false;  // they were: this substep's rows are the last one's
-  const float* search_radius = nullptr;
-  NeighborQuery q;
-};
-
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
@@ -650,7 +627,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (c.pairs_on) find_pairs(c, true);
   if (c.colliders_on) update_planes(c, true);
   // contact history (load_history): each contact's slip left from earlier substeps
-  const bool history = c.pair_friction_pass || c.collider_friction_pass;
+  const bool history = (c.pair_friction_pass || c.collider_friction_pass) &&
+                       s.contact_solver != kContactGaussSeidel;
   if (history) {
     load_history(d, c.pair_friction_pass, c.collider_friction_pass, c.same_rows, c.threads);
     if (c.pair_friction_pass) g.pair_slip = pair_slip_.data();
@@ -659,13 +637,19 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
   // removed from the start and predicted positions alike, without velocity
-  if (s.pre_stabilization && ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
+  if (s.pre_stabilization && s.contact_solver != kContactGaussSeidel &&
+      ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
     pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads);
     g.P = P_stable_.data();
   }
 
-  // 3. Jacobi iterations, friction, pins
-  iterate(c);
+  // 3. Jacobi iterations, friction, pins; or the contacts one at a time (gauss_seidel.cpp)
+  if (s.contact_solver == kContactGaussSeidel) {
+    gauss_seidel(c);
+  } else {
+    seq_loads_.clear();
+    iterate(c);
+  }
 
   // 4. velocity, drift, final collisions; write P and v (and the impact data)
   write_back(d, s, g, prm, colliders, collider_count, c.origin, c.impacts, c.threads);
@@ -1376,6 +1360,9 @@ void GrainsSolver::save_state(StateWriter& w) const {
   w.array(comp_offsets_);
   w.array(comp_members_);
   w.array(rest_offset_);
+  w.section("grains loads");
+  w.value(seq_dt_);
+  w.array(seq_loads_);
 }
 
 void GrainsSolver::load_state(StateReader& r) {
@@ -1403,6 +1390,9 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(comp_offsets_);
   r.array(comp_members_);
   r.array(rest_offset_);
+  r.section("grains loads");
+  r.value(seq_dt_);
+  r.array(seq_loads_);
 }
 
 // ---- contact history ----

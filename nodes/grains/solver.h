@@ -26,6 +26,7 @@ class Iterations;
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
 // mass_shock_method's choices, in its menu's order (kernels/param_table.h)
 enum MassShockMethod { kShockGlobal = 0, kShockLocal = 1 };
+enum ContactSolver { kContactJacobi = 0, kContactGaussSeidel = 1 };
 
 // removes the parentheses of a table's vector default: GR_UNPAREN (0, 1, 0) is 0, 1, 0
 #define GR_UNPAREN(...) __VA_ARGS__
@@ -178,6 +179,7 @@ class GrainsSolver {
   void find_pairs(SubstepContext& c, bool first);
   void update_planes(SubstepContext& c, bool first);
   void iterate(SubstepContext& c);
+  void gauss_seidel(SubstepContext& c);
   void run_friction(SubstepContext& c);
   void project_pins(SubstepContext& c);
   void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole);
@@ -226,6 +228,26 @@ class GrainsSolver {
   static constexpr float kStabilizeTolerance = 0.002f;  // of a grain's radius
   static constexpr int kStabilizeIterations = 64;  // and at most constraint_iterations
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
+  // contact_solver gauss_seidel (gauss_seidel.cpp): this substep's contacts, and the loads the
+  // last substep's contacts ended with, by key (sorted), for the warm start
+  struct SeqContact {
+    int32_t i, j;   // j < 0: collider plane entry e
+    uint32_t e;
+    uint64_t key;
+    float k;        // correction scale (repulsion weight x stiffness fraction; planes 1)
+    float share;    // i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest
+    float mu_s, mu_k;
+    float ln;       // normal correction applied in the substep (m of relative motion)
+    float lt[3];    // tangential correction applied in the substep (m), i's side
+  };
+  struct SeqLoad {
+    uint64_t key;
+    float ln;
+    float lt[3];
+  };
+  std::vector<SeqContact> seq_;
+  std::vector<SeqLoad> seq_loads_;
+  float seq_dt_ = 0;  // the substep the loads were built in
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   // the history saved at the end of the last substep, by grain in that substep's order: the id
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once

@@ -109,12 +109,11 @@ void require_same_run(const std::string& a, const std::string& b, int frames) {
   CHECK(read_text(a + "/colliders.csv").size() > 100);  // the feedback was written
 }
 
-}  // namespace
-
-TEST_CASE("a killed run resumed from its checkpoint writes the frames of an unbroken run",
-          "[checkpoint][cli]") {
-  const std::string dir = temp_dir("resume");
-  const std::string graph = write_file(dir, "scene.json", kScene);
+// The run of `scene` never stopped, on two threads, against the same run killed and resumed
+// from its checkpoints, on one.
+void check_resume(const std::string& name, const std::string& scene) {
+  const std::string dir = temp_dir(name);
+  const std::string graph = write_file(dir, "scene.json", scene);
   const std::string log = dir + "/log.txt";
   // the run that is never stopped, on two threads; the broken one runs on one
   REQUIRE(run_grains("run " + graph + " --out " + dir + "/a --quiet --threads 2", log) == 0);
@@ -130,6 +129,25 @@ TEST_CASE("a killed run resumed from its checkpoint writes the frames of an unbr
   // the run ended at frame 14 with a checkpoint there; --frames lengthens it to the graph's 18
   REQUIRE(run_grains("run --resume " + b + " --quiet --frames 18", log) == 0);
   require_same_run(dir + "/a", b, 18);
+}
+
+}  // namespace
+
+TEST_CASE("a killed run resumed from its checkpoint writes the frames of an unbroken run",
+          "[checkpoint][cli]") {
+  check_resume("resume", kScene);
+}
+
+TEST_CASE("with the contacts one at a time, a resumed run carries the contacts' loads",
+          "[checkpoint][cli][gauss_seidel]") {
+  // contact_solver gauss_seidel carries each contact's load to the next substep: the checkpoint
+  // keeps them, or the resumed run would start cold and differ
+  std::string scene = kScene;
+  const std::string key = "\"add_impact_data\": true";
+  const size_t at = scene.find(key);
+  REQUIRE(at != std::string::npos);
+  scene.insert(at + key.size(), ", \"contact_solver\": \"gauss_seidel\"");
+  check_resume("resume_gs", scene);
 }
 
 TEST_CASE("resume refuses what would not continue the same run", "[checkpoint][cli]") {

@@ -106,6 +106,12 @@ GR_PARAM(FLOAT, over_relaxation, 1, KERNEL, .range(0, 2),
 GR_PARAM(FLOAT, chebyshev_rho, 0, HOST, .range(0, 0.95),
          "Chebyshev acceleration of the iterations after the first 5 (not in POP Grains): the estimated "
          "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
+GR_PARAM(MENU, contact_solver, 0, HOST, .menu_of({"jacobi", "gauss_seidel"}),
+         "jacobi: every grain averages its contacts' corrections (POP Grains); gauss_seidel: contacts and "
+         "collider planes one at a time, each with its own Coulomb cone, their loads carried to the next "
+         "substep (CPU only, not in POP Grains; with it accurate_friction, contact_memory, over_relaxation, "
+         "chebyshev_rho, disable_constraint_averaging and the updates during iterations have no effect; "
+         "heaps and collapses match DEM at 64 substeps with error control off)")
 GR_PARAM(TOGGLE, pre_stabilization, 1, HOST, ,
          "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)")
 GR_PARAM(TOGGLE, update_collisions_during_iterations, 0, HOST, ,

@@ -91,6 +91,26 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
   check_stacks(json::object());
 }
 
+TEST_CASE("contact_solver gauss_seidel: stacks of 50 and 100 grains stand within 1% of N d",
+          "[grains][defaults][gauss_seidel]") {
+  // the same columns and bounds with the contacts projected one at a time, their loads carried
+  // from substep to substep
+  check_stacks({{"contact_solver", "gauss_seidel"}});
+}
+
+TEST_CASE("contact_solver gauss_seidel refuses use_opencl", "[grains][gauss_seidel][bad]") {
+  // the contacts one at a time run on the CPU only: a graph asking for both is refused when it
+  // loads, naming the parameter, whether or not a device is present
+  std::string error;
+  try {
+    defaults_graph({{"contact_solver", "gauss_seidel"}, {"use_opencl", true}}, json::object());
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  CHECK_THAT(error, Catch::Contains("contact_solver gauss_seidel"));
+  CHECK_THAT(error, Catch::Contains("use_opencl"));
+}
+
 TEST_CASE("use_opencl: stacks of 50 and 100 grains stand within 1% of N d on the OpenCL device",
           "[grains][defaults][opencl]") {
   // the iterations and friction passes on PoCL's CPU device, the same bounds
@@ -134,9 +154,16 @@ TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb fri
                                {{"substeps", 8}, {"error_control", false}});
   const float small_steps =
       slide({{"constraint_iterations", 1}}, {{"substeps", 40}, {"error_control", false}});
+  const json gs = {{"contact_solver", "gauss_seidel"}};
+  const float one_at_a_time = slide(gs, json::object());
+  const float one_at_a_time_frictionless =
+      slide({{"contact_solver", "gauss_seidel"}, {"friction_with_particles", 0}}, json::object());
   INFO("moved in 1 s: defaults " << stuck << ", frictionless " << frictionless
                                  << ", one friction pass at 8 x 40 " << one_pass << ", 40 x 1 "
-                                 << small_steps);
+                                 << small_steps << ", gauss_seidel " << one_at_a_time
+                                 << " (frictionless " << one_at_a_time_frictionless << ")");
+  CHECK(one_at_a_time < 0.1f * r);
+  CHECK(one_at_a_time_frictionless > 10 * r);
   CHECK(stuck < 0.1f * r);
   CHECK(one_pass < 0.1f * r);
   CHECK(small_steps < 0.1f * r);

@@ -1,0 +1,288 @@
+// contact_solver gauss_seidel: the contacts of a substep projected one at a time (projected
+// Gauss-Seidel at position level), each grain pair and collider plane with its own Coulomb cone,
+// and each contact's load carried from one substep to the next (a warm start).
+//
+// Why (docs/heap-angle.md, "Gauss-Seidel with carried loads"): the Jacobi average delivers to a
+// contact only the load its iterations carry down within one substep, so deep in a heap the
+// friction bound is a fraction of the overburden and the packing creeps. A contact that keeps
+// its load across substeps, as a DEM contact keeps its force, is bounded by the weight it
+// carries.
+//
+// A contact c between grains i and j (j a plane for colliders) keeps two accumulators over the
+// substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
+// lt, the tangential one. A pass over c:
+//   normal:   C = |x_ij| - (r_i + r_j) (planes: (x_i - x_s) . n - r_i);
+//             ln' = max(0, ln - k C) (it can take back what it pushed, never pull);
+//             i moves a_i (ln' - ln) n, j moves -a_j (ln' - ln) n, a_i = w_i / (w_i + w_j);
+//   friction: u = the pair's relative displacement over the substep (planes: relative to the
+//             collider's motion), its tangential part u_t; lt' = lt - u_t; if |lt'| > mu_s ln'
+//             (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x friction):
+//             Coulomb's law with the normal and tangential loads of the same contact
+//             (Macklin et al. 2014 eqs. 23-25, bounded by the normal multiplier as Mueller et al.
+//             2020 bound XPBD friction); i moves a_i (lt' - lt), j the opposite a_j share.
+// k is the repulsion weight x stiffness fraction (1 for colliders, which always hold).
+//
+// The warm start: every contact the last substep ended with a load (ln > 0) and that the search
+// finds again starts with that load, scaled by (dt / dt_last)^2 (a position-level load is a force
+// x dt^2), applied to the predicted positions before the first pass. A load is a force only when
+// it balanced the grain's weight: one that stopped a landing grain or a rearrangement must not be
+// repeated. So each grain i measures how well the repeated loads balance its external step
+// G_i = p_i - P_i - dt v_i (gravity and forces over the substep): with D_i the displacement they
+// give it, s_i = clamp(1 - |D_i + G_i| / |G_i|, 0, 1), and a contact starts at the smaller s of
+// its grains times its load. A grain at rest (D = -G) starts fully loaded; a grain under no
+// external force starts cold.
+//
+// The passes run in the contacts' order (grain pairs by the lower index, then its planes), on
+// one thread: the result does not depend on the thread count. Rigid shape matching, explicit
+// constraints, clumping and pins are their own groups after each pass, as with the Jacobi
+// iterations (Gauss-Seidel across groups).
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "nodes/grains/kernels/distance.h"
+#include "nodes/grains/kernels/mass_shock.h"
+#include "nodes/grains/substep_context.h"
+
+namespace grains {
+namespace {
+
+constexpr uint32_t kPlaneKey = 0x80000000u;
+
+// the component of a along the unit n removed
+inline gr_float3 tangential(gr_float3 a, gr_float3 n) { return gr_madd(a, n, -gr_dot(a, n)); }
+// a[i] += d s
+inline void move(float* a, int i, gr_float3 d, float s) { gr_store3(a, i, gr_madd(gr_load3(a, i), d, s)); }
+
+}  // namespace
+
+void GrainsSolver::gauss_seidel(SubstepContext& c) {
+  const gr_grains& g = c.g;
+  const gr_params& prm = c.prm;
+  const size_t n = n_;
+  const int ni = static_cast<int>(n);
+  float* p = p_.data();
+  const float* P = c.g.P;
+  const float dt = prm.dt;
+  auto id_of = [&](int i) { return c.d.id ? c.d.id[i] : i; };
+
+  // the contacts: each grain pair once (from the lower index's row), then each grain's planes
+  seq_.clear();
+  const bool pairs = g.nbr_offsets && prm.internal_collisions_weight > 0;
+  const bool skip_constrained =
+      g.con_offsets && !prm.collide_mutually_constrained_particles && !g.nbr_unconstrained;
+  for (int i = 0; i < ni; ++i) {
+    const float wi = g.inv_mass[i];
+    if (pairs) {
+      const float ki = gr_repulsion_scale(&g, &prm, i);
+      for (gr_uint e = g.nbr_offsets[i]; e < g.nbr_offsets[i + 1]; ++e) {
+        const int j = static_cast<int>(g.nbr_indices[e]);
+        if (j <= i) continue;
+        const float wj = g.inv_mass[j];
+        if (!(wi + wj > 0.0f)) continue;
+        if (skip_constrained && gr_constrained(&g, i, j)) continue;
+        const float k = 0.5f * (ki + gr_repulsion_scale(&g, &prm, j));
+        if (!(k > 0.0f)) continue;
+        SeqContact q{};
+        q.i = i;
+        q.j = j;
+        const uint32_t a = static_cast<uint32_t>(id_of(i)), b = static_cast<uint32_t>(id_of(j));
+        q.key = (uint64_t(std::min(a, b)) << 32) | std::max(a, b);
+        q.k = k;
+        q.share = prm.mass_shock == 2 ? gr_pair_share(&g, &prm, i, j) : wi / (wi + wj);
+        const float mu =
+            prm.friction_with_particles * 0.5f * (gr_attr(g.friction, i) + gr_attr(g.friction, j));
+        q.mu_s = prm.static_threshold * mu;
+        q.mu_k = prm.scale_kinetic * mu;
+        seq_.push_back(q);
+      }
+    }
+    if (g.plane_offsets && wi > 0.0f) {
+      const gr_uint b = g.plane_offsets[i];
+      for (gr_uint e = b; e < g.plane_offsets[i + 1]; ++e) {
+        // a grain may touch several planes of one collider (a box's corner): count them
+        const int32_t collider = plane_collider_[e];
+        uint32_t seen = 0;
+        for (gr_uint f = b; f < e; ++f) seen += plane_collider_[f] == collider;
+        SeqContact q{};
+        q.i = i;
+        q.j = -1;
+        q.e = e;
+        q.key = (uint64_t(static_cast<uint32_t>(id_of(i))) << 32) |
+                (kPlaneKey | (static_cast<uint32_t>(collider) << 2) | std::min(seen, 3u));
+        q.k = 1.0f;
+        q.share = 1.0f;
+        const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
+        q.mu_s = prm.static_threshold * mu;
+        q.mu_k = prm.scale_kinetic * mu;
+        seq_.push_back(q);
+      }
+    }
+  }
+
+  // the contact's normal from i's side, and its gap C (< 0: overlap), at positions x
+  auto geometry_at = [&](const float* x, const SeqContact& q, gr_float3* nrm) -> float {
+    const gr_float3 xi = gr_load3(x, q.i);
+    if (q.j < 0) {
+      const float* pl = g.plane + 9 * q.e;
+      *nrm = gr_make3(pl[3], pl[4], pl[5]);
+      return gr_dot(gr_sub(xi, gr_make3(pl[0], pl[1], pl[2])), *nrm) - g.radius[q.i];
+    }
+    const gr_float3 d = gr_sub(xi, gr_load3(x, q.j));
+    const float dist = gr_length(d);
+    *nrm = dist > 0.0f ? gr_scale(d, 1.0f / dist) : gr_make3(0.0f, q.i < q.j ? -1.0f : 1.0f, 0.0f);
+    return dist - g.radius[q.i] - g.radius[q.j];
+  };
+  auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
+  auto apply = [&](const SeqContact& q, gr_float3 d) {
+    move(p, q.i, d, q.share);
+    if (q.j >= 0) move(p, q.j, d, -(1.0f - q.share));
+  };
+
+  // pre-stabilization (Macklin et al. 2014 sec. 4.4), passes in the same order until no
+  // contact moves its grain more than kStabilizeTolerance of its radius (at most
+  // kStabilizeIterations): the overlap of the start positions, removed from start and prediction
+  // alike (no velocity, no friction). Not capped by the iterations, as the Jacobi passes are: an
+  // overlap left to the passes becomes a velocity overlap / dt, which grows as the substeps
+  // shrink (a DEM-settled column, whose soft contacts overlap 0.4% of d, burst at 128 substeps
+  // with 10 passes and ran out 1.06 L0; converged, 0.86 L0, DEM's)
+  if (c.s.pre_stabilization) {
+    P_stable_.assign(P, P + 3 * n);
+    P_stable_.push_back(0.0f);
+    float* x = P_stable_.data();
+    for (int pass = 0; pass < kStabilizeIterations; ++pass) {
+      float moved = 0.0f;
+      for (const SeqContact& q : seq_) {
+        gr_float3 nrm;
+        const float C = geometry_at(x, q, &nrm);
+        if (!(C < 0.0f)) continue;
+        const gr_float3 d = gr_scale(nrm, -q.k * C);
+        moved = std::max(moved, -q.k * C / g.radius[q.i]);
+        move(x, q.i, d, q.share);
+        move(p, q.i, d, q.share);
+        if (q.j >= 0) {
+          move(x, q.j, d, -(1.0f - q.share));
+          move(p, q.j, d, -(1.0f - q.share));
+        }
+      }
+      if (!(moved > kStabilizeTolerance)) break;
+    }
+    c.g.P = P = x;
+  }
+  float* impact = c.impacts ? collider_dx_.data() : nullptr;
+  auto record_impact = [&](const SeqContact& q, gr_float3 d) {
+    if (!impact || q.j >= 0) return;
+    move(impact, GR_MAX_PLANES * q.i + static_cast<int>(q.e - g.plane_offsets[q.i]), d, 1.0f);
+  };
+
+  // the warm start
+  if (!seq_loads_.empty() && seq_dt_ > 0.0f) {
+    const float scale = (dt / seq_dt_) * (dt / seq_dt_);
+    std::vector<gr_float3> repeat(n, gr_make3(0.0f, 0.0f, 0.0f));
+    std::vector<float> load(seq_.size(), 0.0f);
+    std::vector<gr_float3> tang(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f)), normal(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f));
+    for (size_t k = 0; k < seq_.size(); ++k) {
+      SeqContact& q = seq_[k];
+      auto it = std::lower_bound(seq_loads_.begin(), seq_loads_.end(), q.key,
+                                 [](const SeqLoad& l, uint64_t key) { return l.key < key; });
+      if (it == seq_loads_.end() || it->key != q.key) continue;
+      gr_float3& nrm = normal[k];
+      geometry(q, &nrm);
+      // stored on the grain of the lower id
+      const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
+      load[k] = it->ln * scale;
+      tang[k] = tangential(gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale), nrm);
+      const gr_float3 d = gr_add(gr_scale(nrm, load[k]), tang[k]);
+      repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
+      if (q.j >= 0) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
+    }
+    std::vector<float> balance(n, 0.0f);
+    for (int i = 0; i < ni; ++i) {
+      if (!(g.inv_mass[i] > 0.0f)) {
+        balance[i] = 1.0f;  // fixed grains do not move: they take any load
+        continue;
+      }
+      const gr_float3 G = gr_sub(gr_sub(gr_load3(p, i), gr_load3(P, i)), gr_scale(gr_load3(g.v, i), dt));
+      const float gl = gr_length(G);
+      if (gl > 0.0f)
+        balance[i] = std::clamp(1.0f - gr_length(gr_add(repeat[i], G)) / gl, 0.0f, 1.0f);
+    }
+    for (size_t k = 0; k < seq_.size(); ++k) {
+      SeqContact& q = seq_[k];
+      if (!(load[k] > 0.0f)) continue;
+      float f = balance[q.i];
+      if (q.j >= 0) f = std::min(f, balance[q.j]);
+      if (!(f > 0.0f)) continue;
+      q.ln = load[k] * f;
+      const gr_float3 t = gr_scale(tang[k], f);
+      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
+      const gr_float3 d = gr_add(gr_scale(normal[k], q.ln), t);
+      apply(q, d);
+      record_impact(q, d);
+    }
+  }
+
+  // the passes
+  gr_grains others = g;  // explicit constraints and clumping, without the contacts
+  others.plane_offsets = nullptr;
+  gr_params others_prm = prm;
+  others_prm.internal_collisions_weight = 0.0f;
+  if (!(prm.clumping_weight > 0.0f)) others.nbr_offsets = nullptr;
+  const bool other_groups = others.con_offsets || others.nbr_offsets;
+  for (int it = 0; it < c.iterations; ++it) {
+    for (SeqContact& q : seq_) {
+      gr_float3 nrm;
+      const float C = geometry(q, &nrm);
+      if (C >= 0.0f && !(q.ln > 0.0f)) continue;
+      const float ln = std::max(0.0f, q.ln - q.k * C);
+      const gr_float3 dn = gr_scale(nrm, ln - q.ln);
+      q.ln = ln;
+      apply(q, dn);
+      record_impact(q, dn);
+      if (!(ln > 0.0f) || !(q.mu_s > 0.0f || q.mu_k > 0.0f)) continue;
+      gr_float3 u = gr_sub(gr_load3(p, q.i), gr_load3(P, q.i));
+      if (q.j >= 0) {
+        u = gr_sub(u, gr_sub(gr_load3(p, q.j), gr_load3(P, q.j)));
+      } else {
+        const float* pl = g.plane + 9 * q.e;
+        u = gr_sub(u, gr_scale(gr_make3(pl[6], pl[7], pl[8]), dt));
+      }
+      const gr_float3 lt0 = gr_make3(q.lt[0], q.lt[1], q.lt[2]);
+      gr_float3 lt = tangential(gr_sub(lt0, tangential(u, nrm)), nrm);
+      const float len = gr_length(lt);
+      if (len > q.mu_s * ln) lt = gr_scale(lt, q.mu_k * ln / len);
+      const gr_float3 dt_move = gr_sub(lt, lt0);
+      q.lt[0] = lt.x, q.lt[1] = lt.y, q.lt[2] = lt.z;
+      apply(q, dt_move);
+      record_impact(q, dt_move);
+    }
+    if (c.shapes_on) project_shapes(g, prm, c.threads);
+    if (other_groups) {
+      const long ln = static_cast<long>(n);
+      const gr_normal_sums none{nullptr, nullptr, nullptr, nullptr, nullptr};
+      float* next = p_next_.data();
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+      for (long i = 0; i < ln; ++i) {
+        const int ii = static_cast<int>(i);
+        gr_store3(next, ii, gr_iterate(&others, &others_prm, p, ii, &none));
+      }
+      p_.swap(p_next_);
+      p = p_.data();
+    }
+    if (g.targetP) project_pins(c);
+  }
+
+  // the loads the next substep starts from
+  seq_loads_.clear();
+  for (const SeqContact& q : seq_) {
+    if (!(q.ln > 0.0f)) continue;
+    const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
+    seq_loads_.push_back({q.key, q.ln, {sign * q.lt[0], sign * q.lt[1], sign * q.lt[2]}});
+  }
+  std::sort(seq_loads_.begin(), seq_loads_.end(),
+            [](const SeqLoad& a, const SeqLoad& b) { return a.key < b.key; });
+  seq_dt_ = dt;
+}
+
+}  // namespace grains

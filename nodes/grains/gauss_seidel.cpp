@@ -15,8 +15,9 @@
 //             ln' = max(0, ln - k C) (it can take back what it pushed, never pull);
 //             i moves a_i (ln' - ln) n, j moves -a_j (ln' - ln) n, a_i = w_i / (w_i + w_j);
 //   friction: u = the pair's relative displacement over the substep (planes: relative to the
-//             collider's motion), its tangential part u_t; lt' = lt - u_t; if |lt'| > mu_s ln'
-//             (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x friction):
+//             collider's motion), its tangential part u_t; lt' = lt - u_t; unless |lt'| is under
+//             mu_s ln' (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x
+//             friction; gr_friction, contact.h):
 //             Coulomb's law with the normal and tangential loads of the same contact
 //             (Macklin et al. 2014 eqs. 23-25, bounded by the normal multiplier as Mueller et al.
 //             2020 bound XPBD friction); i moves a_i (lt' - lt), j the opposite a_j share.
@@ -41,6 +42,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "nodes/grains/kernels/collider.h"
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/substep_context.h"
@@ -91,10 +93,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         q.key = (uint64_t(std::min(a, b)) << 32) | std::max(a, b);
         q.k = k;
         q.share = prm.mass_shock == 2 ? gr_pair_share(&g, &prm, i, j) : wi / (wi + wj);
-        const float mu =
-            prm.friction_with_particles * 0.5f * (gr_attr(g.friction, i) + gr_attr(g.friction, j));
-        q.mu_s = prm.static_threshold * mu;
-        q.mu_k = prm.scale_kinetic * mu;
+        q.mu = prm.friction_with_particles * 0.5f * (gr_attr(g.friction, i) + gr_attr(g.friction, j));
         seq_.push_back(q);
       }
     }
@@ -113,9 +112,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
                 (kPlaneKey | (static_cast<uint32_t>(collider) << 2) | std::min(seen, 3u));
         q.k = 1.0f;
         q.share = 1.0f;
-        const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
-        q.mu_s = prm.static_threshold * mu;
-        q.mu_k = prm.scale_kinetic * mu;
+        q.mu = prm.friction_with_colliders * gr_attr(g.friction, i);
         seq_.push_back(q);
       }
     }
@@ -123,15 +120,13 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
 
   // the contact's normal from i's side, and its gap C (< 0: overlap), at positions x
   auto geometry_at = [&](const float* x, const SeqContact& q, gr_float3* nrm) -> float {
-    const gr_float3 xi = gr_load3(x, q.i);
     if (q.j < 0) {
-      const float* pl = g.plane + 9 * q.e;
-      *nrm = gr_make3(pl[3], pl[4], pl[5]);
-      return gr_dot(gr_sub(xi, gr_make3(pl[0], pl[1], pl[2])), *nrm) - g.radius[q.i];
+      *nrm = gr_plane_normal(&g, q.e);
+      return -gr_plane_penetration(&g, q.i, q.e, gr_load3(x, q.i));
     }
-    const gr_float3 d = gr_sub(xi, gr_load3(x, q.j));
+    const gr_float3 d = gr_sub(gr_load3(x, q.i), gr_load3(x, q.j));
     const float dist = gr_length(d);
-    *nrm = dist > 0.0f ? gr_scale(d, 1.0f / dist) : gr_make3(0.0f, q.i < q.j ? -1.0f : 1.0f, 0.0f);
+    *nrm = gr_pair_normal(d, dist, q.i, q.j);
     return dist - g.radius[q.i] - g.radius[q.j];
   };
   auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
@@ -240,7 +235,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       q.ln = ln;
       apply(q, dn);
       record_impact(q, dn);
-      if (!(ln > 0.0f) || !(q.mu_s > 0.0f || q.mu_k > 0.0f)) continue;
+      if (!(ln > 0.0f) || !(q.mu > 0.0f)) continue;
       gr_float3 u = gr_sub(gr_load3(p, q.i), gr_load3(P, q.i));
       if (q.j >= 0) {
         u = gr_sub(u, gr_sub(gr_load3(p, q.j), gr_load3(P, q.j)));
@@ -249,9 +244,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         u = gr_sub(u, gr_scale(gr_make3(pl[6], pl[7], pl[8]), dt));
       }
       const gr_float3 lt0 = gr_make3(q.lt[0], q.lt[1], q.lt[2]);
-      gr_float3 lt = tangential(gr_sub(lt0, tangential(u, nrm)), nrm);
-      const float len = gr_length(lt);
-      if (len > q.mu_s * ln) lt = gr_scale(lt, q.mu_k * ln / len);
+      // the substep's tangential correction so far must cancel its slip, within the contact's
+      // cone (gr_friction: static below static_threshold x mu ln, else cut to scale_kinetic x it)
+      const gr_float3 lt =
+          gr_friction(gr_sub(u, lt0), nrm, q.mu * ln, prm.static_threshold, prm.scale_kinetic);
       const gr_float3 dt_move = gr_sub(lt, lt0);
       q.lt[0] = lt.x, q.lt[1] = lt.y, q.lt[2] = lt.z;
       apply(q, dt_move);

@@ -236,7 +236,7 @@ class GrainsSolver {
     uint64_t key;
     float k;        // correction scale (repulsion weight x stiffness fraction; planes 1)
     float share;    // i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest
-    float mu_s, mu_k;
+    float mu;       // friction scale (friction_with_particles or _colliders x the attribute)
     float ln;       // normal correction applied in the substep (m of relative motion)
     float lt[3];    // tangential correction applied in the substep (m), i's side
   };

@@ -79,6 +79,16 @@ struct CookContext {
   size_t max_points = kDefaultMaxPoints;  // the point budget (check_point_budget)
 };
 
+// How far a grain may move in one substep before error control refines it (solver
+// `error_control`, engine/simulation.cpp motion_substeps), as fractions of its radius: `step`
+// bounds |v| dt + |a| dt^2, `fall` bounds a resting grain's fall |a| dt^2. A contact solver whose
+// answer needs finer steps than the neighbour search does (grains `contact_solver gauss_seidel`)
+// asks for tighter ones; a chain takes the tightest any of its nodes asks for.
+struct MotionBounds {
+  double step = 0.5;
+  double fall = 1.0 / 64;
+};
+
 class StateWriter;  // engine/state_stream.h
 class StateReader;
 
@@ -111,6 +121,9 @@ struct NodeTypeInfo {
   // reports a substep error (CookContext::substep_error): a solver's error control acts only on
   // chains holding such a node
   bool reports_error = false;
+  // The motion bounds the node's parameters ask error control for (MotionBounds); unset: the
+  // defaults.
+  std::function<MotionBounds(const ParamSet&)> motion_bounds;
   std::vector<ParamDecl> params;
   std::function<std::unique_ptr<Node>()> make;
   // Colliders only: the shape and pose for evaluated parameters (base_dir: the graph's folder,

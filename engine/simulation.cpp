@@ -134,21 +134,21 @@ void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
 
 namespace {
 
-// The fewest substeps of a frame (fps) in which no point moves more than half its radius in a
-// substep, |v| dt + |a| dt^2 <= r / 2 (a = force / mass, the last substep's): the motion the
-// neighbour candidates (1.5 x the summed radii) and the contacts can follow. Only grains count
-// (ispbd 1 after the last substep): the solver sweeps its other points through the whole step.
-// Points without a radius are skipped; the answer is capped at `most`.
-// A resting grain's fall in one substep, |a| dt^2, is also held to kRestingFall r: the contacts
+// The fewest substeps of a frame (fps) in which no point moves more than bounds.step of its
+// radius in a substep, |v| dt + |a| dt^2 <= step r (a = force / mass, the last substep's): the
+// motion the neighbour candidates (1.5 x the summed radii) and the contacts can follow; r / 2
+// unless a node asks for less (MotionBounds). Only grains count (ispbd 1 after the last
+// substep): the solver sweeps its other points through the whole step. Points without a radius
+// are skipped; the answer is capped at `most`.
+// A resting grain's fall in one substep, |a| dt^2, is also held to bounds.fall r: the contacts
 // project each substep's fall back out, and a fall comparable to the curvature of the grains it
 // rests on carries it over their barriers. A grain in the pocket of three fixed grains, gravity
 // tilted towards an edge of the pocket, frictionless, leaves it at 12.5, 16.4, 18.0, 18.8 and
 // 19.1 degrees with falls of 0.21, 0.053, 0.013, 0.0033 and 0.0008 r (4 to 64 substeps of a
 // 24 fps frame, 1 cm grains; rigid spheres leave at 19.5, LIGGGHTS' Hertz grains at 18.6).
-// r / 64 is 16 substeps for 1 cm grains at 24 fps (tests/nodes/grains/test_pockets.cpp;
-// docs/heap-angle.md "Pockets and pyramids").
-constexpr double kRestingFall = 1.0 / 64;
-int motion_substeps(const ParticleStore& pts, double fps, int most) {
+// r / 64, the default, is 16 substeps for 1 cm grains at 24 fps (tests/nodes/grains/
+// test_pockets.cpp; docs/heap-angle.md "Pockets and pyramids").
+int motion_substeps(const ParticleStore& pts, double fps, int most, const MotionBounds& bounds) {
   const float* P = pts.v3_if("P");
   const float* v = pts.v3_if("v");
   const float* F = pts.v3_if("force");
@@ -159,19 +159,19 @@ int motion_substeps(const ParticleStore& pts, double fps, int most) {
   double worst = 1;
   double fall = 0;  // the largest acc / r
   for (size_t k = 0; k < pts.size(); ++k) {
-    const double half = 0.5 * r[k];
-    if (!pbd[k] || !(half > 0)) continue;
+    const double reach = bounds.step * r[k];
+    if (!pbd[k] || !(reach > 0)) continue;
     const double speed = length(load3(v, k));
     const double acc = F && m && m[k] > 0 ? length(load3(F, k)) / m[k] : 0.0;
-    // the S with speed / (fps S) + acc / (fps S)^2 = half: the positive root in 1 / (fps S)
-    const double x = acc > 0 ? (-speed + std::sqrt(speed * speed + 4 * acc * half)) / (2 * acc)
-                             : (speed > 0 ? half / speed : 0.0);
+    // the S with speed / (fps S) + acc / (fps S)^2 = reach: the positive root in 1 / (fps S)
+    const double x = acc > 0 ? (-speed + std::sqrt(speed * speed + 4 * acc * reach)) / (2 * acc)
+                             : (speed > 0 ? reach / speed : 0.0);
     if (!(x > 0) || !std::isfinite(x)) continue;
     worst = std::max(worst, 1.0 / (fps * x));
     fall = std::max(fall, acc / r[k]);
   }
-  // the fall from rest in one substep, acc dt^2, at most kRestingFall r
-  worst = std::max(worst, std::sqrt(fall / kRestingFall) / fps);
+  // the fall from rest in one substep, acc dt^2, at most bounds.fall r
+  worst = std::max(worst, std::sqrt(fall / bounds.fall) / fps);
   return static_cast<int>(std::min<double>(most, std::ceil(worst)));
 }
 
@@ -250,14 +250,26 @@ void Simulation::step_object(SimObject& obj) {
     control = reports;
   }
   const int most = std::max(base, sp.max_substeps);
+  // the tightest motion bounds the chain's nodes ask for, with their parameters at the frame's
+  // start (the values its first substep evaluates them to)
+  MotionBounds bounds;
+  if (control)
+    for (auto& c : obj.chain) {
+      const NodeTypeInfo* info = graph_.nodes[c.node].info;
+      if (!info->motion_bounds || &c == &solver_entry) continue;
+      checked(c.node, [&] { c.params.evaluate(vars_for(obj, c.node, frame_ / graph_.fps)); });
+      const MotionBounds b = info->motion_bounds(c.params);
+      bounds.step = std::min(bounds.step, b.step);
+      bounds.fall = std::min(bounds.fall, b.fall);
+    }
   const float tolerance = static_cast<float>(sp.error_tolerance);
   // the first frame starts as fine as allowed: before the chain has run nothing is known of the
   // grains' loads, and a first substep as long as a frame can crush a column by several radii
   if (control && obj.substeps == 0) obj.substeps = refine_to(base, most, most);
   int substeps = base;
   if (control)
-    substeps = refine_to(base, std::max(obj.substeps, motion_substeps(obj.pts, graph_.fps, most)),
-                         most);
+    substeps = refine_to(
+        base, std::max(obj.substeps, motion_substeps(obj.pts, graph_.fps, most, bounds)), most);
   bool refined = control && substeps > obj.substeps;
 
   TimeInfo time;
@@ -328,7 +340,7 @@ void Simulation::step_object(SimObject& obj) {
       // the error falls about as dt^2: refine by the power of two whose square covers it, and
       // at least as far as the grains' motion asks
       int factor = 1;
-      const int need = motion_substeps(pts, graph_.fps, most);
+      const int need = motion_substeps(pts, graph_.fps, most, bounds);
       while (substeps * factor * 2 <= most &&
              (static_cast<double>(factor) * factor * tolerance < substep_error ||
               substeps * factor < need))

@@ -45,8 +45,11 @@ collapse 128x20 --set solver.error_control=0 --set solver.substeps=128 --set gra
 collapse 128x20_full_stiffness --set solver.error_control=0 --set solver.substeps=128 \
   --set grains.constraint_iterations=20 --set grains.internal_collisions_stiffness=2560
 pile defaults
-# the contacts one at a time with their loads carried (docs/heap-angle.md, "Gauss-Seidel"), at
-# 64 substeps (error control's overlap measure does not follow this solver's accuracy)
+# the contacts one at a time with their loads carried (docs/heap-angle.md, "Gauss-Seidel"): at
+# the solver's defaults (error control with the motion bounds this solver asks for), and at 64
+# fixed substeps
+collapse gauss_seidel --set grains.contact_solver=gauss_seidel
+pile gauss_seidel --set grains.contact_solver=gauss_seidel
 gs=(--set grains.contact_solver=gauss_seidel --set solver.error_control=0 --set solver.substeps=64)
 collapse gauss_seidel_64 "${gs[@]}"
 pile gauss_seidel_64 "${gs[@]}"

@@ -111,7 +111,7 @@ GR_PARAM(MENU, contact_solver, 0, HOST, .menu_of({"jacobi", "gauss_seidel"}),
          "collider planes one at a time, each with its own Coulomb cone, their loads carried to the next "
          "substep (CPU only, not in POP Grains; with it accurate_friction, contact_memory, over_relaxation, "
          "chebyshev_rho, disable_constraint_averaging and the updates during iterations have no effect; "
-         "heaps and collapses match DEM at 64 substeps with error control off)")
+         "error control keeps a grain's motion a substep under r / 4 and a resting fall under r / 256)")
 GR_PARAM(TOGGLE, pre_stabilization, 1, HOST, ,
          "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)")
 GR_PARAM(TOGGLE, update_collisions_during_iterations, 0, HOST, ,

@@ -9,6 +9,11 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 lig=0
 if [ "${1:-}" = "--liggghts" ]; then lig=1; shift; fi
+# before the Grains rows: without LIGGGHTS its rows would be missing at the end of a long run
+if [ $lig = 1 ] && ! command -v liggghts > /dev/null; then
+  echo "compare.sh: --liggghts needs the liggghts command (Debian package liggghts: sudo apt-get install liggghts)" >&2
+  exit 2
+fi
 out=${1:-out/dem}
 ref=$(cd ../shared/reference/dem && pwd)
 mkdir -p "$out"

@@ -186,11 +186,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // the warm start
   if (!seq_loads_.empty() && seq_dt_ > 0.0f) {
     const float scale = (dt / seq_dt_) * (dt / seq_dt_);
-    std::vector<gr_float3> repeat(n, gr_make3(0.0f, 0.0f, 0.0f));
-    std::vector<float> load(seq_.size(), 0.0f);
+    std::vector<float> load(seq_.size(), 0.0f), factor(seq_.size(), 0.0f);
     std::vector<gr_float3> tang(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f)), normal(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f));
     for (size_t k = 0; k < seq_.size(); ++k) {
-      SeqContact& q = seq_[k];
+      const SeqContact& q = seq_[k];
       auto it = std::lower_bound(seq_loads_.begin(), seq_loads_.end(), q.key,
                                  [](const SeqLoad& l, uint64_t key) { return l.key < key; });
       if (it == seq_loads_.end() || it->key != q.key) continue;
@@ -200,10 +199,21 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
       load[k] = it->ln * scale;
       tang[k] = tangential(gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale), nrm);
-      const gr_float3 d = gr_add(gr_scale(nrm, load[k]), tang[k]);
-      repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
-      if (q.j >= 0) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
+      factor[k] = load[k] > 0.0f ? 1.0f : 0.0f;
     }
+    // what the loads, each scaled by its factor, give every grain (D)
+    std::vector<gr_float3> repeat(n);
+    auto sum_repeat = [&] {
+      std::fill(repeat.begin(), repeat.end(), gr_make3(0.0f, 0.0f, 0.0f));
+      for (size_t k = 0; k < seq_.size(); ++k) {
+        if (!(factor[k] > 0.0f)) continue;
+        const SeqContact& q = seq_[k];
+        const gr_float3 d = gr_scale(gr_add(gr_scale(normal[k], load[k]), tang[k]), factor[k]);
+        repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
+        if (q.j >= 0) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
+      }
+    };
+    sum_repeat();
     std::vector<float> balance(n, 0.0f);
     std::vector<gr_float3> external(n, gr_make3(0.0f, 0.0f, 0.0f));  // G_i
     for (int i = 0; i < ni; ++i) {
@@ -217,10 +227,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       if (gl > 0.0f)
         balance[i] = std::clamp(1.0f - gr_length(gr_add(repeat[i], G)) / gl, 0.0f, 1.0f);
     }
-    std::vector<float> factor(seq_.size(), 0.0f);
     for (size_t k = 0; k < seq_.size(); ++k) {
       const SeqContact& q = seq_[k];
-      if (!(load[k] > 0.0f)) continue;
+      if (!(factor[k] > 0.0f)) continue;
       factor[k] = q.j >= 0 ? std::min(balance[q.i], balance[q.j]) : balance[q.i];
     }
     // The scaled loads must not throw a grain off balance by more than a cold start would or a
@@ -234,14 +243,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     std::vector<uint8_t> cold(n, 0);
     for (bool cut = true; cut;) {
       cut = false;
-      std::fill(repeat.begin(), repeat.end(), gr_make3(0.0f, 0.0f, 0.0f));
-      for (size_t k = 0; k < seq_.size(); ++k) {
-        if (!(factor[k] > 0.0f)) continue;
-        const SeqContact& q = seq_[k];
-        const gr_float3 d = gr_scale(gr_add(gr_scale(normal[k], load[k]), tang[k]), factor[k]);
-        repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
-        if (q.j >= 0) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
-      }
+      sum_repeat();
       for (int i = 0; i < ni; ++i)
         cold[i] = g.inv_mass[i] > 0.0f && gr_length(gr_add(repeat[i], external[i])) >
                                                 std::max(gr_length(external[i]), kWarmSlack * g.radius[i]);

@@ -121,6 +121,15 @@ void check(const std::vector<Grain>& grains, const Reference& ref, float band, f
   CHECK(above > leave);
 }
 
+// LIGGGHTS' tilts: the pocket of three, moved more than 0.1 r in 1 s (bench/dem/pockets/
+// pocket.in); the 30-grain pyramid, some grain moved more than r in 1 s (pyramid.in)
+const Reference kPocketRefs[] = {{"frictionless, towards an edge", 0, 270, 18.6f},
+                                 {"frictionless, towards a grain", 0, 90, 34.1f},
+                                 {"friction 0.5, towards an edge", 0.5f, 270, 48.5f},
+                                 {"friction 0.5, towards a grain", 0.5f, 90, 61.1f}};
+const Reference kPyramidRefs[] = {{"friction 0.5, along a row", 0.5f, 0, 62.3f},
+                                  {"friction 0.5, along a diagonal", 0.5f, 45, 69.4f}};
+
 }  // namespace
 
 TEST_CASE("a grain in the pocket of three leaves it at the DEM's tilt, at the defaults",
@@ -129,11 +138,7 @@ TEST_CASE("a grain in the pocket of three leaves it at the DEM's tilt, at the de
   // control keeps the substep's fall from rest under r / 64 (docs/implementation.md); with the
   // half-radius bound alone it took 4 substeps a frame and the grain left at 12.5, 26.4, 43.0
   // and 56.3 degrees.
-  const Reference refs[] = {{"frictionless, towards an edge", 0, 270, 18.6f},
-                            {"frictionless, towards a grain", 0, 90, 34.1f},
-                            {"friction 0.5, towards an edge", 0.5f, 270, 48.5f},
-                            {"friction 0.5, towards a grain", 0.5f, 90, 61.1f}};
-  for (const Reference& ref : refs)
+  for (const Reference& ref : kPocketRefs)
     check(pocket(), ref, 2, 0.1f * kR, 1.0f * kR, json::object(), json::object());
 }
 
@@ -148,12 +153,10 @@ TEST_CASE("a pyramid of 30 grains leaves its lattice at the DEM's tilt, converge
   // above (docs/heap-angle.md, "Pockets and pyramids"). Frictionless, the DEM's tilt depends
   // on how it is loaded (32.0 and 38.0 degrees tilted at once, 32.2 and 40.8 settled first;
   // rigid grains' top grain leaves its pocket of four at 35.3 and 45), so it is not a reference.
-  const Reference refs[] = {{"friction 0.5, along a row", 0.5f, 0, 62.3f},
-                            {"friction 0.5, along a diagonal", 0.5f, 45, 69.4f}};
   const json converged_grains = {{"constraint_iterations", 100},
                                  {"internal_collisions_stiffness", 6400}};
   const json converged_solver = {{"substeps", 64}, {"error_control", false}};
-  for (const Reference& ref : refs)
+  for (const Reference& ref : kPyramidRefs)
     check(pyramid(), ref, 3, 1.0f * kR, 1.0f * kR, converged_grains, converged_solver);
 }
 
@@ -163,10 +166,8 @@ TEST_CASE("with the contacts one at a time, a pyramid of 30 grains leaves at the
   // the friction holding the lower edge has the layers' load without the 100 iterations the
   // Jacobi average needs (the case above): at the node's 10 iterations the pyramid leaves
   // within the DEM's band.
-  const Reference refs[] = {{"friction 0.5, along a row", 0.5f, 0, 62.3f},
-                            {"friction 0.5, along a diagonal", 0.5f, 45, 69.4f}};
   const json gs = {{"contact_solver", "gauss_seidel"}};
-  for (const Reference& ref : refs)
+  for (const Reference& ref : kPyramidRefs)
     check(pyramid(), ref, 3, 1.0f * kR, 1.0f * kR, gs, json::object());
   // the Jacobi average at the same settings lets the lower edge go before the band
   const json jacobi = {{"contact_solver", "jacobi"}, {"friction_with_particles", 0.5}};
@@ -175,11 +176,7 @@ TEST_CASE("with the contacts one at a time, a pyramid of 30 grains leaves at the
 
 TEST_CASE("with the contacts one at a time, a grain in the pocket of three leaves it at the DEM's "
           "tilt", "[grains][friction][dem][gauss_seidel]") {
-  const Reference refs[] = {{"frictionless, towards an edge", 0, 270, 18.6f},
-                            {"frictionless, towards a grain", 0, 90, 34.1f},
-                            {"friction 0.5, towards an edge", 0.5f, 270, 48.5f},
-                            {"friction 0.5, towards a grain", 0.5f, 90, 61.1f}};
   const json gs = {{"contact_solver", "gauss_seidel"}};
-  for (const Reference& ref : refs)
+  for (const Reference& ref : kPocketRefs)
     check(pocket(), ref, 2, 0.1f * kR, 1.0f * kR, gs, json::object());
 }

@@ -105,10 +105,13 @@ class GrainsNode : public Node {
       d.impact_normal = imp_n_.data();
       d.impact_collider = imp_c_.data();
     }
+    const bool sleeping = st.sleep_speed > 0;
+    if (sleeping) put_to_sleep(s, d, st);
     // stats only for error control: the evaluator measures each frame itself (measure_frame)
     GrainsStats stats;
     solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(),
                     ctx.substep_error ? &stats : nullptr);
+    if (sleeping) update_sleep(s, st, ctx.colliders);
     if (ctx.substep_error) *ctx.substep_error = std::max(*ctx.substep_error, stats.mean_penetration);
     if (d.prim_count > 0) scatter_constraints(s);
     if (impacts) write_impacts(ctx, d);
@@ -165,6 +168,119 @@ class GrainsNode : public Node {
     st.keep_velocity = ctx.time.stabilize;
     st.threads = ctx.threads;
     return st;
+  }
+
+  // Sleeping (sleep_speed > 0; DESIGN §4). Point attributes carry it from substep to substep:
+  // sleepanchor, where the grain's current stay began, sleeptime, how long (s) it has stayed
+  // within sleep_speed x sleep_time of it, and sleepaccel, its force / mass when it fell asleep.
+  // A grain whose sleeptime has reached sleep_time sleeps: for the substep it is a fixed grain
+  // (mass 0, v 0), which the others lean on and bounce off like the help page's fixed grains,
+  // and it ends the substep where it began. Pinned grains and constraint endpoints never sleep
+  // (a sleeper would anchor its partner).
+  void put_to_sleep(ParticleStore& s, GrainsData& d, const GrainsSettings& st) {
+    const size_t n = idx_.size();
+    float* T = s.f("sleeptime");
+    float* A = s.v3("sleepanchor");
+    const float* a_slept = s.v3("sleepaccel");
+    const float* F = s.v3("force");
+    asleep_.assign(n, 0);
+    can_sleep_.assign(n, 1);
+    for (size_t c = 0; c < 2 * d.prim_count; ++c) can_sleep_[d.prim_points[c]] = 0;
+    if (d.targetstiffness)
+      for (size_t k = 0; k < n; ++k)
+        if (d.targetstiffness[k] > 0) can_sleep_[k] = 0;
+    awake_mass_ = mass_;
+    v_start_ = v_;
+    P_start_ = P_;
+    for (size_t k = 0; k < n; ++k) {
+      if (!(mass_[k] > 0)) can_sleep_[k] = 0;
+      const uint32_t i = idx_[k];
+      if (!can_sleep_[k] || !(T[i] >= st.sleep_time)) continue;
+      // a force that changed since the grain fell asleep (by more than 1% of it, or 1e-3 m/s^2)
+      // wakes it: a gravity that tilts, a wind that starts
+      const Vec3 a0 = load3(a_slept, i);
+      if (length(load3(F, i) / mass_[k] - a0) > 0.01f * length(a0) + 1e-3f) {
+        T[i] = 0.0f;
+        store3(A, i, load3(P_.data(), k));
+        continue;
+      }
+      asleep_[k] = 1;
+      mass_[k] = 0.0f;
+      store3(v_.data(), k, Vec3{});
+    }
+  }
+
+  // After the substep: a sleeper the substep moved faster than the wake speed (a collider pushed
+  // it) wakes there, the others go back to where they slept; a sleeper touched by a collider that
+  // moved, or by an awake grain faster than the wake speed at the substep's start or end, wakes;
+  // awake grains count their
+  // stay and fall asleep with v = 0 when it reaches sleep_time. The wake speed is 4 x sleep_speed
+  // beyond the speed one substep of the grain's own forces gives (a resting grain's velocity
+  // holds up to that much of its fall). Each grain writes only its own slots: the same for any
+  // thread count.
+  void update_sleep(ParticleStore& s, const GrainsSettings& st,
+                    const std::vector<ColliderState>& colliders) {
+    const size_t n = idx_.size();
+    float* T = s.f("sleeptime");
+    float* A = s.v3("sleepanchor");
+    float* a_slept = s.v3("sleepaccel");
+    const float* F = s.v3("force");
+    const float dt = st.dt, wake = 4.0f * st.sleep_speed;
+    const float stay = st.sleep_speed * st.sleep_time;
+    auto wake_limit = [&](size_t k) {
+      return wake + length(load3(F, idx_[k])) / awake_mass_[k] * dt;
+    };
+    woken_.assign(n, 0);
+    for (size_t k = 0; k < n; ++k) {
+      if (!asleep_[k]) continue;
+      const Vec3 start = load3(P_start_.data(), k);
+      if (length(load3(P_.data(), k) - start) > wake_limit(k) * dt) {
+        woken_[k] = 1;
+      } else {
+        store3(P_.data(), k, start);
+        store3(v_.data(), k, Vec3{});
+      }
+    }
+    // a collider that moved this substep wakes the sleepers it touches, at its start or end
+    // pose (a floor that drops away leaves none hanging)
+    for (const ColliderState& col : colliders) {
+      if (col.still()) continue;
+      for (size_t k = 0; k < n; ++k) {
+        if (!asleep_[k] || woken_[k]) continue;
+        const Vec3 p = load3(P_.data(), k);
+        const float reach = 1.05f * r_[k] + length(col.velocity_at(p)) * dt;
+        if (col.distance(p, nullptr, 2.0f * reach) < reach) woken_[k] = 1;
+      }
+    }
+    if (const NeighborList* rows = solver_.candidates()) {
+      for (size_t k = 0; k < n; ++k) {
+        if (!asleep_[k] || woken_[k]) continue;
+        const Vec3 pk = load3(P_.data(), k);
+        for (uint32_t e = rows->offsets[k]; e < rows->offsets[k + 1] && !woken_[k]; ++e) {
+          const uint32_t j = rows->indices[e];
+          if (asleep_[j] || !(awake_mass_[j] > 0)) continue;
+          const float speed = std::max(length(load3(v_start_.data(), j)), length(load3(v_.data(), j)));
+          if (!(speed > wake_limit(j))) continue;
+          const float reach = 1.05f * (r_[k] + r_[j]);
+          if (length(load3(P_.data(), j) - pk) < reach) woken_[k] = 1;
+        }
+      }
+    }
+    for (size_t k = 0; k < n; ++k) {
+      const uint32_t i = idx_[k];
+      const Vec3 p = load3(P_.data(), k);
+      if (asleep_[k] && !woken_[k]) continue;
+      if (woken_[k] || !can_sleep_[k] || length(p - load3(A, i)) > stay) {
+        store3(A, i, p);
+        T[i] = 0.0f;
+        continue;
+      }
+      T[i] += dt;
+      if (T[i] >= st.sleep_time) {
+        store3(v_.data(), k, Vec3{});
+        store3(a_slept, i, load3(F, i) / awake_mass_[k]);
+      }
+    }
   }
 
   // The primitives whose two endpoints are both gathered grains, with compact endpoints. A
@@ -317,6 +433,9 @@ class GrainsNode : public Node {
   std::vector<float> imp_j_, imp_x_, imp_n_;        // collider contacts of the substep
   std::vector<int32_t> imp_c_;
   std::unordered_map<int32_t, float> strongest_;    // id -> strongest normal impulse this frame
+  // sleeping (put_to_sleep, update_sleep): per gathered grain
+  std::vector<uint8_t> asleep_, can_sleep_, woken_;
+  std::vector<float> awake_mass_, v_start_, P_start_;
 };
 
 }  // namespace

@@ -605,6 +605,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noex
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
+  candidates_on_ = false;
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
   gr_grains g;
@@ -625,6 +626,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // 2. neighbour candidates and collider planes from the predicted positions
   open_search(c);
   if (c.pairs_on) find_pairs(c, true);
+  candidates_on_ = c.pairs_on;
   if (c.colliders_on) update_planes(c, true);
   // contact history (load_history): each contact's slip left from earlier substeps
   const bool history = (c.pair_friction_pass || c.collider_friction_pass) &&

@@ -131,8 +131,12 @@ class GrainsSolver {
   // matching's components and rest shapes. The rest is scratch, rebuilt in every substep.
   void save_state(StateWriter& w) const;
   void load_state(StateReader& r);
+  // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
+  // it searched none (no contacts and no clumping). Valid until the next substep.
+  const NeighborList* candidates() const { return candidates_on_ ? &neighbors_ : nullptr; }
 
  private:
+  bool candidates_on_ = false;
   void build_constraints(const GrainsData& d);
   // leaves out of neighbors_ every pair joined by an explicit constraint (con_offsets_ and
   // con_other_ built); keeps each row's order

@@ -58,6 +58,10 @@ pile gauss_seidel --set grains.contact_solver=gauss_seidel
 gs=(--set grains.contact_solver=gauss_seidel --set solver.error_control=0 --set solver.substeps=64)
 collapse gauss_seidel_64 "${gs[@]}"
 pile gauss_seidel_64 "${gs[@]}"
+# the same solver with sleeping at a quarter of a grain a second (docs/heap-angle.md, "Sleeping")
+sl=(--set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0.0025)
+collapse gauss_seidel_sleep "${sl[@]}"
+pile gauss_seidel_sleep "${sl[@]}"
 if [ $lig = 1 ]; then
   # run_all.sh writes its results beside itself: a writable copy
   rm -rf "$out/ref"; cp -r "$ref" "$out/ref"; chmod -R u+w "$out/ref"

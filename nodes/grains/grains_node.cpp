@@ -213,8 +213,8 @@ class GrainsNode : public Node {
   // After the substep: a sleeper the substep moved faster than the wake speed (a collider pushed
   // it) wakes there, the others go back to where they slept; a sleeper touched by a collider that
   // moved, or by an awake grain faster than the wake speed at the substep's start or end, wakes;
-  // awake grains count their
-  // stay and fall asleep with v = 0 when it reaches sleep_time. The wake speed is 4 x sleep_speed
+  // awake grains count their stay and fall asleep with v = 0 (their force / mass noted) when it
+  // reaches sleep_time. The wake speed is 4 x sleep_speed
   // beyond the speed one substep of the grain's own forces gives (a resting grain's velocity
   // holds up to that much of its fall). Each grain writes only its own slots: the same for any
   // thread count.

@@ -187,13 +187,23 @@ class SourceNode : public Node {
     Vec3 lo = c - Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
     float jitter = static_cast<float>(p.jitter) * s;
     uint64_t counter = 0;
+    // a box's hexagonal rows and layers stay within the square lattice's extent: an offset
+    // row ends half a separation short, an offset layer a row short (its rows stand s / sqrt(12)
+    // over the others'), so that every grain lies wholly inside the box (a sleeve around it is
+    // not entered)
+    const Vec3 hi = c + Vec3{(nx - 1) * dx, (ny - 1) * dy, (nz - 1) * dz} * 0.5f;
+    const bool clip = hex && shape == kBox;
     for (int j = 0; j < ny; ++j)
       for (int k = 0; k < nz; ++k)
         for (int i = 0; i < nx; ++i) {
           Vec3 q = lo + Vec3{i * dx, j * dy, k * dz};
           if (hex) {
-            q.x += (k % 2) * s * 0.5f + (j % 2) * s * 0.5f;
+            q.x += ((j + k) % 2) * s * 0.5f;
             q.z += (j % 2) * s * std::sqrt(3.0f) / 6;
+            if (clip && (q.x > hi.x + 1e-4f * s || q.z > hi.z + 1e-4f * s)) {
+              counter += 3;
+              continue;
+            }
           }
           if (jitter > 0) {
             q += Vec3{rand01(ctx.seed, counter) - 0.5f, rand01(ctx.seed, counter + 1) - 0.5f,

@@ -539,7 +539,7 @@ std::vector<size_t> cluster_sizes(const ParticleStore& pts) {
 
 TEST_CASE("snowball: clumping holds a thrown ball together and it breaks into clumps on impact",
           "[graphs][clumping]") {
-  // A ball of 1266 grains thrown at the ground at 10 m/s with clumping (weight 0.5, range 1.2 x
+  // A ball of 1272 grains thrown at the ground at 10 m/s with clumping (weight 0.5, range 1.2 x
   // the summed radii, inside the packing's second neighbours at 1.41). In flight it is one
   // piece. The impact breaks grains off its main mass; what tells snow from sand is how they
   // leave. Snow leaves in clumps: most of the broken-off grains (more than half) are in clumps
@@ -552,7 +552,7 @@ TEST_CASE("snowball: clumping holds a thrown ball together and it breaks into cl
                               {parse_override("grains.clumping_weight=" + std::to_string(weight))}));
     sim.step_frame();
     const size_t n = sim.object(0).pts.size();
-    REQUIRE(n == 1266);
+    REQUIRE(n == 1272);
     CHECK(cluster_sizes(sim.object(0).pts).size() == 1);  // in flight: one piece
     for (int f = 2; f <= 12; ++f) sim.step_frame();
     const std::vector<size_t> sizes = cluster_sizes(sim.object(0).pts);  // largest first

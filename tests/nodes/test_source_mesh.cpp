@@ -57,6 +57,33 @@ LoadError load_error(const json& params, const std::string& dir) {
 
 }  // namespace
 
+TEST_CASE("box fill, hexagonal: every grain wholly inside the box, none closer than the separation",
+          "[source]") {
+  // column_collapse's column: a 0.1 x 0.2 x 0.1 box at 1 cm in a sleeve whose walls touch the
+  // box. The offset rows and layers had reached a separation past the box, into the sleeve.
+  const float s = 0.01f;
+  const Vec3 c{0, 0.1f, 0}, half{0.05f, 0.1f, 0.05f};
+  const ParticleStore pts = emit({{"shape", "box"}, {"center", {c.x, c.y, c.z}},
+                                  {"size", {2 * half.x, 2 * half.y, 2 * half.z}},
+                                  {"separation", s}, {"packing", "hexagonal"}},
+                                 test::source_dir() + "/tests");
+  const std::vector<Vec3> P = positions(pts);
+  // hexagonal close packing: about 0.74 / (4/3 pi (s/2)^3) a unit volume, less the surface's
+  double expected = 0.7405 * 8 * half.x * half.y * half.z / (4.0 / 3.0 * M_PI * std::pow(s / 2, 3));
+  INFO(P.size() << " grains, " << expected << " at the bulk's density");
+  CHECK(P.size() > 0.7 * expected);
+  CHECK(P.size() < expected);
+  float closest = 1e9f;
+  for (size_t a = 0; a < P.size(); ++a) {
+    const Vec3 d = P[a] - c;
+    CHECK(std::fabs(d.x) + s / 2 <= half.x + 1e-6f);
+    CHECK(std::fabs(d.y) + s / 2 <= half.y + 1e-6f);
+    CHECK(std::fabs(d.z) + s / 2 <= half.z + 1e-6f);
+    for (size_t b = a + 1; b < P.size(); ++b) closest = std::min(closest, length(P[b] - P[a]));
+  }
+  CHECK(closest == Approx(s).epsilon(1e-4));
+}
+
 TEST_CASE("volume fill: the packing inside a closed mesh, every grain wholly inside",
           "[mesh][source]") {
   const std::string dir = test::temp_dir("source_volume");

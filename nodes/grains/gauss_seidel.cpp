@@ -188,11 +188,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
     c.g.P = P = x;
   }
-  float* impact = c.impacts ? collider_dx_.data() : nullptr;
-  auto record_impact = [&](const SeqContact& q, gr_float3 d) {
-    if (!impact || q.j >= 0) return;
-    move(impact, GR_MAX_PLANES * q.i + static_cast<int>(q.e - g.plane_offsets[q.i]), d, 1.0f);
-  };
 
   // the warm start
   if (!seq_loads_.empty() && seq_dt_ > 0.0f) {
@@ -272,7 +267,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
       const gr_float3 d = gr_add(gr_scale(normal[k], q.ln), t);
       apply(q, d);
-      record_impact(q, d);
     }
   }
 
@@ -293,8 +287,16 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       const gr_float3 dn = gr_scale(nrm, ln - q.ln);
       q.ln = ln;
       apply(q, dn);
-      record_impact(q, dn);
-      if (!(ln > 0.0f) || !(q.mu > 0.0f)) continue;
+      if (!(ln > 0.0f) || !(q.mu > 0.0f)) {
+        // a contact without load holds no friction: the cone of a zero normal load is a point,
+        // and what it had rubbed this substep is given back
+        if (q.lt[0] != 0.0f || q.lt[1] != 0.0f || q.lt[2] != 0.0f) {
+          const gr_float3 back = gr_make3(-q.lt[0], -q.lt[1], -q.lt[2]);
+          q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;
+          apply(q, back);
+        }
+        continue;
+      }
       gr_float3 u = gr_sub(gr_load3(p, q.i), gr_load3(P, q.i));
       if (q.j >= 0) {
         u = gr_sub(u, gr_sub(gr_load3(p, q.j), gr_load3(P, q.j)));
@@ -310,7 +312,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       const gr_float3 dt_move = gr_sub(lt, lt0);
       q.lt[0] = lt.x, q.lt[1] = lt.y, q.lt[2] = lt.z;
       apply(q, dt_move);
-      record_impact(q, dt_move);
     }
     if (c.shapes_on) {
       project_shapes(g, prm, c.threads);
@@ -329,6 +330,20 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       p = p_.data();
     }
     if (g.targetP) project_pins(c);
+  }
+
+  // impact data: what each collider plane moved its grain over the substep, its load and its
+  // friction as they ended (a plane's normal holds through the substep; a contact that took
+  // back all it pushed gave nothing)
+  if (c.impacts) {
+    for (const SeqContact& q : seq_) {
+      if (q.j >= 0 || (!(q.ln > 0.0f) && q.lt[0] == 0.0f && q.lt[1] == 0.0f && q.lt[2] == 0.0f))
+        continue;
+      gr_float3 nrm;
+      geometry(q, &nrm);
+      const gr_float3 d = gr_add(gr_scale(nrm, q.ln), gr_make3(q.lt[0], q.lt[1], q.lt[2]));
+      gr_store3(collider_dx_.data(), GR_MAX_PLANES * q.i + static_cast<int>(q.e - g.plane_offsets[q.i]), d);
+    }
   }
 
   // the loads the next substep starts from

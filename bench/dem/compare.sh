@@ -50,6 +50,9 @@ collapse 128x20 --set solver.error_control=0 --set solver.substeps=128 --set gra
 collapse 128x20_full_stiffness --set solver.error_control=0 --set solver.substeps=128 \
   --set grains.constraint_iterations=20 --set grains.internal_collisions_stiffness=2560
 pile defaults
+# without sleeping (on by default at half a radius a second; docs/heap-angle.md, "Sleeping")
+collapse awake --set grains.sleep_speed=0
+pile awake --set grains.sleep_speed=0
 # the contacts one at a time with their loads carried (docs/heap-angle.md, "Gauss-Seidel"): at
 # the solver's defaults (error control with the motion bounds this solver asks for), and at 64
 # fixed substeps
@@ -58,10 +61,9 @@ pile gauss_seidel --set grains.contact_solver=gauss_seidel
 gs=(--set grains.contact_solver=gauss_seidel --set solver.error_control=0 --set solver.substeps=64)
 collapse gauss_seidel_64 "${gs[@]}"
 pile gauss_seidel_64 "${gs[@]}"
-# the same solver with sleeping at a quarter of a grain a second (docs/heap-angle.md, "Sleeping")
-sl=(--set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0.0025)
-collapse gauss_seidel_sleep "${sl[@]}"
-pile gauss_seidel_sleep "${sl[@]}"
+# the same solver awake
+collapse gauss_seidel_awake --set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0
+pile gauss_seidel_awake --set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0
 if [ $lig = 1 ]; then
   # run_all.sh writes its results beside itself: a writable copy
   rm -rf "$out/ref"; cp -r "$ref" "$out/ref"; chmod -R u+w "$out/ref"

@@ -105,7 +105,9 @@ class GrainsNode : public Node {
       d.impact_normal = imp_n_.data();
       d.impact_collider = imp_c_.data();
     }
-    const bool sleeping = st.sleep_speed > 0;
+    // a sleeper exchanges no impulse with the colliders: impact data and collision feedback
+    // keep every grain awake, so that a resting heap still presses on what holds it
+    const bool sleeping = st.sleep_speed > 0 && !impacts && !feedback;
     if (sleeping) put_to_sleep(s, d, st);
     // stats only for error control: the evaluator measures each frame itself (measure_frame)
     GrainsStats stats;
@@ -170,9 +172,11 @@ class GrainsNode : public Node {
     return st;
   }
 
-  // Sleeping (sleep_speed > 0; DESIGN §4). Point attributes carry it from substep to substep:
-  // sleepanchor, where the grain's current stay began, sleeptime, how long (s) it has stayed
-  // within sleep_speed x sleep_time of it, and sleepaccel, its force / mass when it fell asleep.
+  // Sleeping (sleep_speed > 0; DESIGN §4), its speeds in grain radii a second (one number
+  // serves millimetre sand and metre boulders). Point attributes carry it from substep to
+  // substep: sleepanchor, where the grain's current stay began, sleeptime, how long (s) it has
+  // stayed within sleep_speed x sleep_time radii of it, sleepaccel, its force / mass when it
+  // fell asleep, and sleepcontacts, how many grains touched it then.
   // A grain whose sleeptime has reached sleep_time sleeps: for the substep it is a fixed grain
   // (mass 0, v 0), which the others lean on and bounce off like the help page's fixed grains,
   // and it ends the substep where it began. Pinned grains and constraint endpoints never sleep
@@ -183,6 +187,7 @@ class GrainsNode : public Node {
     float* A = s.v3("sleepanchor");
     const float* a_slept = s.v3("sleepaccel");
     const float* F = s.v3("force");
+    const float* P = s.v3("P");
     asleep_.assign(n, 0);
     can_sleep_.assign(n, 1);
     for (size_t c = 0; c < 2 * d.prim_count; ++c) can_sleep_[d.prim_points[c]] = 0;
@@ -198,8 +203,10 @@ class GrainsNode : public Node {
       if (!can_sleep_[k] || !(T[i] >= st.sleep_time)) continue;
       // a force that changed since the grain fell asleep (by more than 1% of it, or 1e-3 m/s^2)
       // wakes it: a gravity that tilts, a wind that starts
+      // as does a move from outside (an attribute node's) beyond its stay
       const Vec3 a0 = load3(a_slept, i);
-      if (length(load3(F, i) / mass_[k] - a0) > 0.01f * length(a0) + 1e-3f) {
+      if (length(load3(F, i) / mass_[k] - a0) > 0.01f * length(a0) + 1e-3f ||
+          length(load3(P, i) - load3(A, i)) > st.sleep_speed * st.sleep_time * r_[k]) {
         T[i] = 0.0f;
         store3(A, i, load3(P_.data(), k));
         continue;
@@ -212,9 +219,10 @@ class GrainsNode : public Node {
 
   // After the substep: a sleeper the substep moved faster than the wake speed (a collider pushed
   // it) wakes there, the others go back to where they slept; a sleeper touched by a collider that
-  // moved, or by an awake grain faster than the wake speed at the substep's start or end, wakes;
-  // awake grains count their stay and fall asleep with v = 0 (their force / mass noted) when it
-  // reaches sleep_time. The wake speed is 4 x sleep_speed
+  // moved, or by an awake grain faster than the wake speed at the substep's start or end, wakes,
+  // as does one that fewer grains touch than when it fell asleep (a grain under it was killed,
+  // or rolled away); awake grains count their stay and fall asleep with v = 0 (their force /
+  // mass and their contacts noted) when it reaches sleep_time. The wake speed is 4 x sleep_speed
   // beyond the speed one substep of the grain's own forces gives (a resting grain's velocity
   // holds up to that much of its fall). Each grain writes only its own slots: the same for any
   // thread count.
@@ -224,11 +232,24 @@ class GrainsNode : public Node {
     float* T = s.f("sleeptime");
     float* A = s.v3("sleepanchor");
     float* a_slept = s.v3("sleepaccel");
+    int32_t* touched = s.i("sleepcontacts");
     const float* F = s.v3("force");
     const float dt = st.dt, wake = 4.0f * st.sleep_speed;
     const float stay = st.sleep_speed * st.sleep_time;
     auto wake_limit = [&](size_t k) {
-      return wake + length(load3(F, idx_[k])) / awake_mass_[k] * dt;
+      return wake * r_[k] + length(load3(F, idx_[k])) / awake_mass_[k] * dt;
+    };
+    const NeighborList* rows = solver_.candidates();
+    // the grains within reach x (r_k + r_j) of grain k
+    auto touching = [&](size_t k, float reach) {
+      int32_t count = 0;
+      if (!rows) return count;
+      const Vec3 pk = load3(P_.data(), k);
+      for (uint32_t e = rows->offsets[k]; e < rows->offsets[k + 1]; ++e) {
+        const uint32_t j = rows->indices[e];
+        if (length(load3(P_.data(), j) - pk) < reach * (r_[k] + r_[j])) ++count;
+      }
+      return count;
     };
     woken_.assign(n, 0);
     for (size_t k = 0; k < n; ++k) {
@@ -252,9 +273,15 @@ class GrainsNode : public Node {
         if (col.distance(p, nullptr, 2.0f * reach) < reach) woken_[k] = 1;
       }
     }
-    if (const NeighborList* rows = solver_.candidates()) {
+    if (rows) {
       for (size_t k = 0; k < n; ++k) {
         if (!asleep_[k] || woken_[k]) continue;
+        // a contact it slept on is gone: a grain 1.05 radii-sums away when it fell asleep is
+        // counted until 1.25 (an awake neighbour's jiggle does not wake it)
+        if (touching(k, 1.25f) < touched[idx_[k]]) {
+          woken_[k] = 1;
+          continue;
+        }
         const Vec3 pk = load3(P_.data(), k);
         for (uint32_t e = rows->offsets[k]; e < rows->offsets[k + 1] && !woken_[k]; ++e) {
           const uint32_t j = rows->indices[e];
@@ -270,7 +297,7 @@ class GrainsNode : public Node {
       const uint32_t i = idx_[k];
       const Vec3 p = load3(P_.data(), k);
       if (asleep_[k] && !woken_[k]) continue;
-      if (woken_[k] || !can_sleep_[k] || length(p - load3(A, i)) > stay) {
+      if (woken_[k] || !can_sleep_[k] || length(p - load3(A, i)) > stay * r_[k]) {
         store3(A, i, p);
         T[i] = 0.0f;
         continue;
@@ -279,6 +306,7 @@ class GrainsNode : public Node {
       if (T[i] >= st.sleep_time) {
         store3(v_.data(), k, Vec3{});
         store3(a_slept, i, load3(F, i) / awake_mass_[k]);
+        touched[i] = touching(k, 1.05f);
       }
     }
   }

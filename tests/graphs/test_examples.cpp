@@ -62,10 +62,10 @@ TEST_CASE("default graph: the poured grains stand as a heap at 30 degrees and st
   // 20% and 80% of the peak) must stand at 30 degrees or more, and the peak must pass 0.15 m: a
   // 30 degree cone of that volume over a 0.3 m foot is 0.17 m high. Rest, as the accuracy issue
   // states it: from frame 120 to 168 (2 s) the angle changes by less than 1 degree and the
-  // kinetic energy ends under 1e-6 J a grain. The graph lets its grains sleep (sleep_speed 5 mm/s,
-  // test_sleeping.cpp); awake, the same heap lost 2.5 degrees and 9 mm of its peak from frame 96
-  // to 144 and kept 1e-5 to 3e-5 J a grain (each grain's velocity holds about half a substep's
-  // fall, and the upper layers creep).
+  // kinetic energy ends under 1e-6 J a grain. Its grains sleep at the node's default
+  // sleep_speed (half a radius a second, 5 mm/s; test_sleeping.cpp); awake, the same heap lost
+  // 2.5 degrees and 9 mm of its peak from frame 96 to 144 and kept 1e-5 to 3e-5 J a grain (each
+  // grain's velocity holds about half a substep's fall, and the upper layers creep).
   auto sim = run("default", 96);
   const ParticleStore& pts = sim->object(0).pts;
   CHECK(pts.size() == 3750);

@@ -291,10 +291,10 @@ std::map<std::string, Special> specials() {
       {"grains.clumping_stiffness", {{{"clumping_weight", 0.5}}, 1}},
       {"grains.static_threshold", {json::object(), 0.1}},
       {"grains.drift_threshold", {json::object(), 0.5}},
-      // sleeping within the scene's 12 frames: a short sleep_time, a speed the settling grains
-      // fall under
-      {"grains.sleep_speed", {{{"sleep_time", 0.1}}, 0.05}},
-      {"grains.sleep_time", {{{"sleep_speed", 0.05}}, 0.1}},
+      // sleeping within the scene's 12 frames asks for a short sleep_time; off, the settling grains
+      // keep moving
+      {"grains.sleep_speed", {{{"sleep_time", 0.1}}, 0}},
+      {"grains.sleep_time", {json::object(), 0.1}},
       {"grains.max_speed", {json::object(), 0.5}},
       {"grains.max_acceleration", {json::object(), 5}},
       {"grains.max_neighbors", {json::object(), 2}},

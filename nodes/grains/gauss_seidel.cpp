@@ -35,9 +35,13 @@
 // leave farther from balance than no load at all (|D' + G| > |G|).
 //
 // The passes run in the contacts' order (grain pairs by the lower index, then its planes), on
-// one thread: the result does not depend on the thread count. Rigid shape matching, explicit
-// constraints, clumping and pins are their own groups after each pass, as with the Jacobi
-// iterations (Gauss-Seidel across groups).
+// one thread: the result does not depend on the thread count. Explicit constraints and clumping
+// are one Jacobi group before each pass, rigid shape matching and pins their own groups after
+// it (Gauss-Seidel across groups). The contacts come after the constraints, so that where the
+// two disagree (a pair asked to collide that is bonded closer than contact) the grains do not
+// overlap. Measured: with the constraints after the contacts such a pair stayed at its rest
+// length, and snowball's clumped ball broke off 1,255 grains, 318 alone; now it leaves in
+// clumps as the Jacobi path's does.
 #include <omp.h>
 
 #include <algorithm>
@@ -278,6 +282,18 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   if (!(prm.clumping_weight > 0.0f)) others.nbr_offsets = nullptr;
   const bool other_groups = others.con_offsets || others.nbr_offsets;
   for (int it = 0; it < c.iterations; ++it) {
+    if (other_groups) {
+      const long ln = static_cast<long>(n);
+      const gr_normal_sums none{nullptr, nullptr, nullptr, nullptr, nullptr};
+      float* next = p_next_.data();
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+      for (long i = 0; i < ln; ++i) {
+        const int ii = static_cast<int>(i);
+        gr_store3(next, ii, gr_iterate(&others, &others_prm, p, ii, &none));
+      }
+      p_.swap(p_next_);
+      p = p_.data();
+    }
     for (SeqContact& q : seq_) {
       if (!(q.ln > 0.0f) && apart_at(p, q)) continue;
       gr_float3 nrm;
@@ -316,18 +332,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     if (c.shapes_on) {
       project_shapes(g, prm, c.threads);
       p = p_.data();  // project_shapes swaps p_ with its goals
-    }
-    if (other_groups) {
-      const long ln = static_cast<long>(n);
-      const gr_normal_sums none{nullptr, nullptr, nullptr, nullptr, nullptr};
-      float* next = p_next_.data();
-#pragma omp parallel for schedule(static) num_threads(c.threads)
-      for (long i = 0; i < ln; ++i) {
-        const int ii = static_cast<int>(i);
-        gr_store3(next, ii, gr_iterate(&others, &others_prm, p, ii, &none));
-      }
-      p_.swap(p_next_);
-      p = p_.data();
     }
     if (g.targetP) project_pins(c);
   }

@@ -238,51 +238,51 @@ TEST_CASE("sleeping: a gravity that tilts wakes the grains asleep under it", "[g
   CHECK(least > 1.0f);
 }
 
-TEST_CASE("sleeping: grains asleep on grains that are killed wake and fall", "[grains][sleeping]") {
-  // A 5 x 5 layer sleeps in the pockets of a 6 x 6 layer on the ground; at 1 s a kill node
-  // removes the lower layer (for one frame: after that the upper layer lies where the lower
-  // did). The upper grains lose the four grains each slept on and wake: a
-  // fall of sqrt(2) r (0.7 cm) takes 0.04 s, so at 1.5 s they rest on the ground, at r within
-  // the ground contact's tolerance (0.1 r here). Asleep they would hang at r + d / sqrt(2).
+namespace {
+
+// The layer (and the layer in its pockets, when asked) asleep at 1 s, with `node` between the
+// force and the grains acting for the frame after 1 s only (its activation is set here), run to
+// 1.5 s: `asleep` grains slept before it, `left` remain, and every one must lie on the ground
+// again, at r within 0.1 r (a resting grain's ground overlap is far less; the hanging
+// alternatives are 0.4 d and more above it).
+void check_back_on_ground(json node, bool second_layer, size_t asleep, size_t left) {
   const float r = 0.005f;
-  const json kill = {{"name", "kill"},
-                     {"type", "kill"},
-                     {"params",
-                      {{"activation", "$T > 1 ? ($T < 1.02 ? 1 : 0) : 0"},
-                       {"center", {0, r, 0}},
-                       {"size", {1, r, 1}}}}};
-  auto layer = sleeping_layer(json::array({kGround}), json::object(), 0, {0, -kG, 0}, kill, true);
+  node["params"]["activation"] = "$T > 1 ? ($T < 1.02 ? 1 : 0) : 0";
+  auto layer =
+      sleeping_layer(json::array({kGround}), json::object(), 0, {0, -kG, 0}, node, second_layer);
   Simulation& sim = *layer;
-  CHECK(sleepers(sim.object(0).pts) == 61);
+  CHECK(sleepers(sim.object(0).pts) == asleep);
   for (int f = 0; f < 12; ++f) sim.step_frame();  // to 1.5 s
   const ParticleStore& s = sim.object(0).pts;
-  REQUIRE(s.size() == 25);
+  REQUIRE(s.size() == left);
   for (size_t k = 0; k < s.size(); ++k) {
     INFO("grain " << k << " at height " << s.v3_if("P")[3 * k + 1] << " m");
     CHECK(std::fabs(s.v3_if("P")[3 * k + 1] - r) < 0.1f * r);
   }
 }
 
+}  // namespace
+
+TEST_CASE("sleeping: grains asleep on grains that are killed wake and fall", "[grains][sleeping]") {
+  // A 5 x 5 layer sleeps in the pockets of a 6 x 6 layer on the ground; at 1 s a kill node
+  // removes the lower layer (for one frame: after that the upper layer lies where the lower
+  // did). The upper grains lose the four grains each slept on and wake: a fall of sqrt(2) r
+  // (0.7 cm) takes 0.04 s, so at 1.5 s they rest on the ground. Asleep they would hang at
+  // r + d / sqrt(2).
+  const float r = 0.005f;
+  check_back_on_ground(
+      {{"name", "kill"}, {"type", "kill"}, {"params", {{"center", {0, r, 0}}, {"size", {1, r, 1}}}}},
+      true, 61, 25);
+}
+
 TEST_CASE("sleeping: grains moved from outside wake", "[grains][sleeping]") {
   // At 1 s an attribute node lifts the sleeping layer by 5 cm: a grain moved beyond its stay
-  // wakes and falls back, 5 cm in 0.1 s, so at 1.5 s it rests on the ground again, at r within
-  // 0.1 r. Asleep it would hang where it was put.
-  const float r = 0.005f;
-  const json lift = {{"name", "lift"},
-                     {"type", "attribute"},
-                     {"params",
-                      {{"activation", "$T > 1 ? ($T < 1.02 ? 1 : 0) : 0"},
-                       {"attribute", "P"},
-                       {"value", "$TX, $TY + 0.05, $TZ"}}}};
-  auto layer = sleeping_layer(json::array({kGround}), json::object(), 0, {0, -kG, 0}, lift);
-  Simulation& sim = *layer;
-  CHECK(sleepers(sim.object(0).pts) == 36);
-  for (int f = 0; f < 12; ++f) sim.step_frame();  // to 1.5 s
-  const ParticleStore& s = sim.object(0).pts;
-  for (size_t k = 0; k < s.size(); ++k) {
-    INFO("grain " << k << " at height " << s.v3_if("P")[3 * k + 1] << " m");
-    CHECK(std::fabs(s.v3_if("P")[3 * k + 1] - r) < 0.1f * r);
-  }
+  // wakes and falls back, 5 cm in 0.1 s, so at 1.5 s it rests on the ground again. Asleep it
+  // would hang where it was put.
+  check_back_on_ground({{"name", "lift"},
+                        {"type", "attribute"},
+                        {"params", {{"attribute", "P"}, {"value", "$TX, $TY + 0.05, $TZ"}}}},
+                       false, 36, 36);
 }
 
 TEST_CASE("sleeping: pinned grains never sleep", "[grains][sleeping]") {

@@ -50,7 +50,8 @@ std::vector<Override> common_overrides(const LawSettings& s, const std::string& 
           // fixed settings: error control would pick its own substeps
           parse_override(std::string("solver.error_control=") + (s.error_control ? "1" : "0")),
           parse_override("grains.constraint_iterations=" + std::to_string(s.iterations)),
-          parse_override("grains.friction_with_particles=" + num(s.friction, 9))};
+          parse_override("grains.friction_with_particles=" + num(s.friction, 9)),
+          parse_override("grains.contact_solver=" + s.contact_solver)};
 }
 
 // a node type's default for an int parameter (the registry's declaration, so that the lab's
@@ -72,8 +73,9 @@ std::string solver_tag(const LawSettings& s) {
 std::string solver_sentence(const LawSettings& s) {
   if (s.error_control)
     return "the node defaults (" + std::to_string(s.iterations) +
-           " iterations, error control picking the substeps)";
-  return std::to_string(s.substeps) + " substeps x " + std::to_string(s.iterations) + " iterations";
+           " iterations, error control picking the substeps), contact_solver " + s.contact_solver;
+  return std::to_string(s.substeps) + " substeps x " + std::to_string(s.iterations) +
+         " iterations, contact_solver " + s.contact_solver;
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -507,6 +509,7 @@ int run_validation(const ValidationOptions& o) {
   }
   if (o.defaults) plan.solver_settings = {{0, 0}};
   if (o.friction >= 0) plan.settings.friction = o.friction;
+  if (!o.contact_solver.empty()) plan.settings.contact_solver = o.contact_solver;
   int threads =
       o.threads > 0 ? o.threads : static_cast<int>(std::max(1L, sysconf(_SC_NPROCESSORS_ONLN)));
   fs::create_directories(o.out_dir);
@@ -825,6 +828,8 @@ CLI::App* add_validation_command(CLI::App& app, ValidationOptions& o, int argc, 
       ->excludes(iterations);
   c->add_option("--friction", o.friction, "friction_with_particles of the collapse and silo runs")
       ->check(non_negative_number());
+  c->add_option("--contact-solver", o.contact_solver, "contact_solver of every run (default: jacobi)")
+      ->check(CLI::IsMember({"jacobi", "gauss_seidel"}));
   std::string cmd;
   for (int k = 0; k < argc; ++k) cmd += (k ? " " : "") + std::string(argv[k]);
   o.command = cmd;

@@ -75,6 +75,10 @@ struct LawSettings {
   // picking them each frame): the plan's (0, 0) setting
   bool error_control = false;
   double friction = 0.5;  // grains.friction_with_particles
+  // grains.contact_solver: the Jacobi path, on which VALIDATION.md's figures were measured;
+  // with gauss_seidel (the node's default) the quick plan's lattice columns of a <= 1 hardly
+  // slump and the repose hopper jams (docs/heap-angle.md)
+  std::string contact_solver = "jacobi";
 };
 
 // Axisymmetric column collapse (Lube et al. 2004; Lajeunesse et al. 2004): a cylinder of radius
@@ -188,6 +192,7 @@ struct ValidationOptions {
   int substeps = 0, iterations = 0;  // > 0: replace the plan's solver setting
   bool defaults = false;             // replace it with the defaults and error control
   double friction = -1;              // >= 0: replace the plan's friction (collapse and silo)
+  std::string contact_solver;        // not empty: replace the plan's (jacobi)
   std::string command;               // the command line, for the report
 };
 

@@ -42,28 +42,30 @@ pile() {
   echo "pile $name cpu_s $t $($G heap "$d/frame_0119.ply" --d 0.01) dem 55.4"
 }
 
+# the defaults: the contacts one at a time with their loads carried (contact_solver gauss_seidel;
+# docs/heap-angle.md, "Gauss-Seidel"), error control with the motion bounds this solver asks
+# for; then at 64 fixed substeps, and without sleeping (on by default at half a radius a second;
+# docs/heap-angle.md, "Sleeping")
 collapse defaults
-collapse 128x20 --set solver.error_control=0 --set solver.substeps=128 --set grains.constraint_iterations=20
-# the same at full stiffness: 128 x 20 is past internal_collisions_stiffness 1000, so the row above
-# removes 1000 / 2560 of each overlap an iteration, and friction, bounded by the overlap each
-# iteration sees, counts it about 2.6 times (docs/heap-angle.md)
-collapse 128x20_full_stiffness --set solver.error_control=0 --set solver.substeps=128 \
-  --set grains.constraint_iterations=20 --set grains.internal_collisions_stiffness=2560
 pile defaults
-# without sleeping (on by default at half a radius a second; docs/heap-angle.md, "Sleeping")
+fixed=(--set solver.error_control=0 --set solver.substeps=64)
+collapse 64x10 "${fixed[@]}"
+pile 64x10 "${fixed[@]}"
 collapse awake --set grains.sleep_speed=0
 pile awake --set grains.sleep_speed=0
-# the contacts one at a time with their loads carried (docs/heap-angle.md, "Gauss-Seidel"): at
-# the solver's defaults (error control with the motion bounds this solver asks for), and at 64
-# fixed substeps
-collapse gauss_seidel --set grains.contact_solver=gauss_seidel
-pile gauss_seidel --set grains.contact_solver=gauss_seidel
-gs=(--set grains.contact_solver=gauss_seidel --set solver.error_control=0 --set solver.substeps=64)
-collapse gauss_seidel_64 "${gs[@]}"
-pile gauss_seidel_64 "${gs[@]}"
-# the same solver awake
-collapse gauss_seidel_awake --set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0
-pile gauss_seidel_awake --set grains.contact_solver=gauss_seidel --set grains.sleep_speed=0
+# POP Grains' Jacobi average (contact_solver jacobi) at its error-control bounds, awake, and at
+# 128 x 20 fixed; 128 x 20 is past internal_collisions_stiffness 1000, so that row removes
+# 1000 / 2560 of each overlap an iteration, and friction, bounded by the overlap each iteration
+# sees, counts it about 2.6 times: the same at full stiffness (docs/heap-angle.md)
+jacobi=(--set grains.contact_solver=jacobi)
+collapse jacobi "${jacobi[@]}"
+pile jacobi "${jacobi[@]}"
+collapse jacobi_awake "${jacobi[@]}" --set grains.sleep_speed=0
+pile jacobi_awake "${jacobi[@]}" --set grains.sleep_speed=0
+collapse jacobi_128x20 "${jacobi[@]}" --set solver.error_control=0 --set solver.substeps=128 \
+  --set grains.constraint_iterations=20
+collapse jacobi_128x20_full_stiffness "${jacobi[@]}" --set solver.error_control=0 --set solver.substeps=128 \
+  --set grains.constraint_iterations=20 --set grains.internal_collisions_stiffness=2560
 if [ $lig = 1 ]; then
   # run_all.sh writes its results beside itself: a writable copy
   rm -rf "$out/ref"; cp -r "$ref" "$out/ref"; chmod -R u+w "$out/ref"

@@ -12,7 +12,8 @@
 // substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
 // lt, the tangential one. A pass over c:
 //   normal:   C = |x_ij| - (r_i + r_j) (planes: (x_i - x_s) . n - r_i);
-//             ln' = max(0, ln - k C) (it can take back what it pushed, never pull);
+//             ln' = max(0, ln - w k C) (it can take back what it pushed, never pull; w is
+//             over_relaxation, successive over-relaxation above 1);
 //             i moves a_i (ln' - ln) n, j moves -a_j (ln' - ln) n, a_i = w_i / (w_i + w_j);
 //   friction: u = the pair's relative displacement over the substep (planes: relative to the
 //             collider's motion), its tangential part u_t; lt' = lt - u_t; unless |lt'| is under
@@ -281,6 +282,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   others_prm.internal_collisions_weight = 0.0f;
   if (!(prm.clumping_weight > 0.0f)) others.nbr_offsets = nullptr;
   const bool other_groups = others.con_offsets || others.nbr_offsets;
+  // over_relaxation: successive over-relaxation of the normal loads (omega > 1 pushes past the
+  // contact, the next pass takes back what overshot)
+  const float relax = prm.over_relaxation;
   for (int it = 0; it < c.iterations; ++it) {
     if (other_groups) {
       const long ln = static_cast<long>(n);
@@ -299,7 +303,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       gr_float3 nrm;
       const float C = geometry(q, &nrm);
       if (C >= 0.0f && !(q.ln > 0.0f)) continue;
-      const float ln = std::max(0.0f, q.ln - q.k * C);
+      const float ln = std::max(0.0f, q.ln - relax * q.k * C);
       const gr_float3 dn = gr_scale(nrm, ln - q.ln);
       q.ln = ln;
       apply(q, dn);

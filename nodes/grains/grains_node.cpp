@@ -498,11 +498,44 @@ void register_grains_node() {
     }
     return b;
   };
-  // use_opencl on a machine without the device (or a GRAINS_OPENCL_DEVICE naming none) is refused
+  // Refused: a parameter of the Jacobi path set with contact_solver gauss_seidel (it would have
+  // no effect), and use_opencl with gauss_seidel or on a machine without the device (or a
+  // GRAINS_OPENCL_DEVICE naming none)
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
+    const bool gauss_seidel = p.choice("contact_solver") == kContactGaussSeidel;
+    if (gauss_seidel) {
+      // what gauss_seidel does instead of each (gauss_seidel.cpp)
+      const GrainsSettings def;
+      struct JacobiOnly {
+        const char* name;
+        bool toggle;  // else a float
+        double def;
+        const char* instead;
+      };
+      const JacobiOnly jacobi_only[] = {
+          {"accurate_friction", true, def.accurate_friction ? 1.0 : 0.0,
+           "its friction is each contact's own Coulomb cone in every pass"},
+          {"contact_memory", false, def.contact_memory, "it carries each contact's load from one substep to the next"},
+          {"chebyshev_rho", false, def.chebyshev_rho, "its passes are not Jacobi iterations"},
+          {"update_collisions_during_iterations", true, def.update_collisions_during_iterations ? 1.0 : 0.0,
+           "its contacts are found once a substep"},
+          {"update_neighbors_during_iterations", true, def.update_neighbors_during_iterations ? 1.0 : 0.0,
+           "its contacts are found once a substep"},
+      };
+      for (const auto& [name, toggle, value, instead] : jacobi_only) {
+        if (!p.authored(name)) continue;
+        const double now = toggle ? (p.b(name) ? 1.0 : 0.0) : p.f(name);
+        if (float(now) == float(value) && !p.is_animated(name)) continue;  // the default, said again
+        return {std::string(name) + " works with contact_solver jacobi only (gauss_seidel, the default: " +
+                    instead + "); set contact_solver to jacobi or remove " + name,
+                name};
+      }
+    }
     if (!p.b("use_opencl")) return {"", ""};
-    if (p.choice("contact_solver") == kContactGaussSeidel)
-      return {"contact_solver gauss_seidel runs on the CPU only; turn use_opencl off", "use_opencl"};
+    if (gauss_seidel)
+      return {"the OpenCL device runs contact_solver jacobi only; set contact_solver to jacobi, or turn "
+              "use_opencl off",
+              "use_opencl"};
     opencl::DeviceChoice choice;
     std::string problem;
     if (!opencl::chosen_device(&choice, &problem)) return {problem, "use_opencl"};

@@ -35,7 +35,7 @@ GR_PARAM(FLOAT, friction_with_colliders, 1, KERNEL, .at_least(0).scaled_by("fric
 GR_PARAM(FLOAT, friction_with_particles, 1, KERNEL, .at_least(0).scaled_by("friction"),
          "grain-grain Coulomb friction: static mu = this x static_threshold, kinetic mu = this x scale_kinetic")
 GR_PARAM(TOGGLE, accurate_friction, 1, HOST, ,
-         "apply friction after every iteration instead of once after the loop")
+         "apply friction after every iteration instead of once after the loop (contact_solver jacobi only)")
 GR_PARAM(FLOAT, static_threshold, 1, KERNEL, .at_least(0),
          "static friction: slip under this x friction x the contact's normal correction in the substep is removed")
 GR_PARAM(FLOAT, scale_kinetic, 0.5, KERNEL, .at_least(0),
@@ -43,7 +43,7 @@ GR_PARAM(FLOAT, scale_kinetic, 0.5, KERNEL, .at_least(0),
 GR_PARAM(FLOAT, contact_memory, 0.01, KERNEL, .at_least(0).scaled_by("friction"),
          "slip a stuck contact remembers and pulls back in later substeps, at most this x the static "
          "coefficient x the summed radii (a DEM contact's tangential spring), and no more than one substep of its "
-         "static friction pulls back; 0: none, a heap creeps (not in POP Grains)")
+         "static friction pulls back; 0: none, a heap creeps (not in POP Grains; contact_solver jacobi only)")
 /* internal collisions (kernels/contact.h); weight 0 = off */
 GR_PARAM(FLOAT, internal_collisions_weight, 1, KERNEL, .range(0, 2).scaled_by("repulsionweight"),
          "weight of grain-grain collisions; 0 disables them")
@@ -111,22 +111,25 @@ GR_PARAM(FLOAT, sleep_speed, 0.5, HOST, .at_least(0).unit("radii/s"),
 GR_PARAM(FLOAT, sleep_time, 0.5, HOST, .positive().unit("s"),
          "how long a grain must stay within sleep_speed x sleep_time radii of one place to fall asleep")
 GR_PARAM(FLOAT, over_relaxation, 1, KERNEL, .range(0, 2),
-         "scale of the averaged corrections; above 1 converges faster")
+         "scale of the averaged corrections (jacobi), of each contact's normal step (gauss_seidel) and of "
+         "the constraints' corrections; above 1 converges faster")
 GR_PARAM(FLOAT, chebyshev_rho, 0, HOST, .range(0, 0.95),
          "Chebyshev acceleration of the iterations after the first 5 (not in POP Grains): the estimated "
-         "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged")
-GR_PARAM(MENU, contact_solver, 0, HOST, .menu_of({"jacobi", "gauss_seidel"}),
-         "jacobi: every grain averages its contacts' corrections (POP Grains); gauss_seidel: contacts and "
-         "collider planes one at a time, each with its own Coulomb cone, their loads carried to the next "
-         "substep (CPU only, not in POP Grains; with it accurate_friction, contact_memory, over_relaxation, "
-         "chebyshev_rho, disable_constraint_averaging and the updates during iterations have no effect; "
-         "error control keeps a grain's motion a substep under r / 4 and a resting fall under r / 256)")
+         "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged (contact_solver "
+         "jacobi only)")
+GR_PARAM(MENU, contact_solver, 1, HOST, .menu_of({"jacobi", "gauss_seidel"}),
+         "gauss_seidel (the default; not in POP Grains, CPU only): contacts and collider planes one at a "
+         "time, each with its own Coulomb cone, their loads carried to the next substep, over_relaxation "
+         "scaling each normal step; error control keeps a grain's motion a substep under r / 4 and a "
+         "resting fall under r / 256. jacobi: every grain averages its contacts' corrections, as POP "
+         "Grains; accurate_friction, contact_memory, chebyshev_rho and the updates during iterations work "
+         "with it only (set with gauss_seidel they are refused), and use_opencl needs it")
 GR_PARAM(TOGGLE, pre_stabilization, 1, HOST, ,
          "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)")
 GR_PARAM(TOGGLE, update_collisions_during_iterations, 0, HOST, ,
-         "re-find collider planes every iteration")
+         "re-find collider planes every iteration (contact_solver jacobi only)")
 GR_PARAM(TOGGLE, update_neighbors_during_iterations, 0, HOST, ,
-         "re-find neighbours every iteration")
+         "re-find neighbours every iteration (contact_solver jacobi only)")
 GR_PARAM(TOGGLE, final_collision_test, 1, HOST, ,
          "a swept collision pass after the loop: no leaks through thin or moving colliders")
 GR_PARAM(TOGGLE, disable_constraint_averaging, 0, KERNEL, ,

@@ -91,30 +91,50 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
   check_stacks(json::object());
 }
 
-TEST_CASE("contact_solver gauss_seidel: stacks of 50 and 100 grains stand within 1% of N d",
-          "[grains][defaults][gauss_seidel]") {
-  // the same columns and bounds with the contacts projected one at a time, their loads carried
-  // from substep to substep
-  check_stacks({{"contact_solver", "gauss_seidel"}});
+TEST_CASE("contact_solver jacobi: stacks of 50 and 100 grains stand within 1% of N d",
+          "[grains][defaults]") {
+  // the same columns and bounds with the Jacobi average of POP Grains (the defaults project the
+  // contacts one at a time, their loads carried from substep to substep)
+  check_stacks({{"contact_solver", "jacobi"}});
 }
 
-TEST_CASE("contact_solver gauss_seidel refuses use_opencl", "[grains][gauss_seidel][bad]") {
-  // the contacts one at a time run on the CPU only: a graph asking for both is refused when it
-  // loads, naming the parameter, whether or not a device is present
-  std::string error;
-  try {
-    defaults_graph({{"contact_solver", "gauss_seidel"}, {"use_opencl", true}}, json::object());
-  } catch (const std::exception& e) {
-    error = e.what();
+TEST_CASE("contact_solver gauss_seidel refuses use_opencl and the Jacobi path's parameters",
+          "[grains][gauss_seidel][bad]") {
+  // the contacts one at a time run on the CPU only: a graph asking for the device with the
+  // default solver is refused when it loads, naming the parameter, whether or not a device is
+  // present; so is a parameter only the Jacobi path reads, set to anything but its default
+  // (it would do nothing). Its default said again, or the parameter with jacobi, loads.
+  auto error_of = [](const json& grains) {
+    try {
+      defaults_graph(grains, json::object());
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  std::string error = error_of({{"use_opencl", true}});
+  CHECK_THAT(error, Catch::Contains("/params/use_opencl: the OpenCL device runs contact_solver jacobi only"));
+  const json jacobi_only[] = {{{"accurate_friction", false}},
+                              {{"contact_memory", 0.02}},
+                              {{"chebyshev_rho", 0.9}},
+                              {{"update_collisions_during_iterations", true}},
+                              {{"update_neighbors_during_iterations", true}}};
+  for (const json& p : jacobi_only) {
+    const std::string name = p.begin().key();
+    INFO(name);
+    CHECK_THAT(error_of(p), Catch::Contains("/params/" + name + ": " + name +
+                                            " works with contact_solver jacobi only"));
+    json with_jacobi = p;
+    with_jacobi["contact_solver"] = "jacobi";
+    CHECK(error_of(with_jacobi).empty());
   }
-  CHECK_THAT(error, Catch::Contains("contact_solver gauss_seidel"));
-  CHECK_THAT(error, Catch::Contains("use_opencl"));
+  CHECK(error_of({{"accurate_friction", true}, {"contact_memory", 0.01}}).empty());
 }
 
 TEST_CASE("use_opencl: stacks of 50 and 100 grains stand within 1% of N d on the OpenCL device",
           "[grains][defaults][opencl]") {
   // the iterations and friction passes on PoCL's CPU device, the same bounds
-  check_stacks({{"use_opencl", true}});
+  check_stacks({{"use_opencl", true}, {"contact_solver", "jacobi"}});
 }
 
 TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb friction",
@@ -150,20 +170,22 @@ TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb fri
   };
   const float stuck = slide(json::object(), json::object());
   const float frictionless = slide({{"friction_with_particles", 0}}, json::object());
-  const float one_pass = slide({{"accurate_friction", false}, {"constraint_iterations", 40}},
-                               {{"substeps", 8}, {"error_control", false}});
-  const float small_steps =
-      slide({{"constraint_iterations", 1}}, {{"substeps", 40}, {"error_control", false}});
-  const json gs = {{"contact_solver", "gauss_seidel"}};
-  const float one_at_a_time = slide(gs, json::object());
-  const float one_at_a_time_frictionless =
-      slide({{"contact_solver", "gauss_seidel"}, {"friction_with_particles", 0}}, json::object());
-  INFO("moved in 1 s: defaults " << stuck << ", frictionless " << frictionless
-                                 << ", one friction pass at 8 x 40 " << one_pass << ", 40 x 1 "
-                                 << small_steps << ", gauss_seidel " << one_at_a_time
-                                 << " (frictionless " << one_at_a_time_frictionless << ")");
-  CHECK(one_at_a_time < 0.1f * r);
-  CHECK(one_at_a_time_frictionless > 10 * r);
+  // the Jacobi path (POP Grains'): at its defaults, with one friction pass a substep, and at 40
+  // substeps of one iteration
+  const float jacobi = slide({{"contact_solver", "jacobi"}}, json::object());
+  const float jacobi_frictionless =
+      slide({{"contact_solver", "jacobi"}, {"friction_with_particles", 0}}, json::object());
+  const float one_pass =
+      slide({{"contact_solver", "jacobi"}, {"accurate_friction", false}, {"constraint_iterations", 40}},
+            {{"substeps", 8}, {"error_control", false}});
+  const float small_steps = slide({{"contact_solver", "jacobi"}, {"constraint_iterations", 1}},
+                                  {{"substeps", 40}, {"error_control", false}});
+  INFO("moved in 1 s: defaults " << stuck << ", frictionless " << frictionless << "; jacobi " << jacobi
+                                 << " (frictionless " << jacobi_frictionless
+                                 << "), one friction pass at 8 x 40 " << one_pass << ", 40 x 1 "
+                                 << small_steps);
+  CHECK(jacobi < 0.1f * r);
+  CHECK(jacobi_frictionless > 10 * r);
   CHECK(stuck < 0.1f * r);
   CHECK(one_pass < 0.1f * r);
   CHECK(small_steps < 0.1f * r);

@@ -17,11 +17,13 @@ using namespace grains;
 
 namespace {
 
-// sand_pile's first `frames` frames with `sets` and use_opencl as given
+// sand_pile's first `frames` frames with `sets` and use_opencl as given, with the Jacobi path
+// (the device's)
 std::unique_ptr<Simulation> pour(bool opencl, int frames, std::vector<std::string> sets = {},
                                  int threads = 1) {
   register_builtin_nodes();
   sets.push_back(std::string("grains.use_opencl=") + (opencl ? "true" : "false"));
+  sets.push_back("grains.contact_solver=jacobi");
   std::vector<Override> overrides;
   for (const std::string& s : sets) overrides.push_back(parse_override(s));
   Graph g = load_graph(test::source_dir() + "/graphs/sand_pile.json", overrides);
@@ -72,6 +74,7 @@ TEST_CASE("use_opencl: a substep agrees with the CPU path's within float roundin
   packed.s = test::settings(24, 8, 40);  // settled with shallow overlaps
   packed.run(0.5f);
   packed.s = test::settings(24, 2, 20);
+  packed.s.contact_solver = kContactJacobi;  // the device's path
   packed.s.friction_with_particles = 0;
   packed.s.friction_with_colliders = 0;
   // the premise of the bound: how deep two grains can press into each other during the
@@ -121,14 +124,15 @@ TEST_CASE("use_opencl: the same graph gives the same frames run to run", "[openc
 }
 
 TEST_CASE("grains run --opencl runs every grains node on the device", "[cli][opencl]") {
-  // --opencl is use_opencl on every grains node: its frames are byte for byte those of
-  // `--set grains.use_opencl=true` (the device is deterministic run to run, see above; the CPU
+  // --opencl is use_opencl and contact_solver jacobi on every grains node: its frames are byte
+  // for byte those of the two `--set`s (the device is deterministic run to run, see above; the CPU
   // path's frame_0002 differs from them from byte 314, so a flag that did nothing would fail)
   const std::string dir = test::temp_dir("run_opencl");
   const std::string graph = test::source_dir() + "/graphs/sand_pile.json";
   const std::string run = "run " + graph + " --frames 2 --quiet --out " + dir;
   REQUIRE(test::run_grains(run + "/flag --opencl", dir + "/log.txt") == 0);
-  REQUIRE(test::run_grains(run + "/set --set grains.use_opencl=true", dir + "/log.txt") == 0);
+  REQUIRE(test::run_grains(run + "/set --set grains.use_opencl=true --set grains.contact_solver=jacobi",
+                           dir + "/log.txt") == 0);
   const std::string flag = test::read_text(dir + "/flag/frame_0002.ply");
   CHECK(flag.size() > 99 * 3 * sizeof(float));
   CHECK(flag == test::read_text(dir + "/set/frame_0002.ply"));

@@ -167,10 +167,10 @@ TEST_CASE("sleeping: a grain dropped on sleepers wakes those it hits and rests o
   // The layer sleeps after 0.5 s at rest. A grain dropped from 0.1 m over the pocket between
   // four grains lands at 1.4 m/s: the four wake (their stay starts again), the grain settles in
   // the pocket, at r + d / sqrt(2) over the ground (the pocket of a square layer of pitch d),
-  // and all sleep again. Sleeping is the node's, around the solver: the same with the contacts
-  // one at a time and on the OpenCL device.
-  for (const json& variant : {json::object(), json{{"contact_solver", "gauss_seidel"}},
-                              json{{"use_opencl", true}}}) {
+  // and all sleep again. Sleeping is the node's, around the solver: the same with the Jacobi
+  // path and on the OpenCL device.
+  for (const json& variant : {json::object(), json{{"contact_solver", "jacobi"}},
+                              json{{"use_opencl", true}, {"contact_solver", "jacobi"}}}) {
     INFO(variant.dump());
     auto layer = sleeping_layer(json::array({kGround}), variant);
     Simulation& sim = *layer;

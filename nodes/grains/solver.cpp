@@ -605,6 +605,9 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noex
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
+  // the device runs the Jacobi path only (the node refuses the pair at load)
+  if (s.use_opencl && s.contact_solver == kContactGaussSeidel)
+    throw std::invalid_argument("use_opencl needs contact_solver jacobi");
   candidates_on_ = false;
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;

@@ -504,28 +504,21 @@ void register_grains_node() {
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
     const bool gauss_seidel = p.choice("contact_solver") == kContactGaussSeidel;
     if (gauss_seidel) {
-      // what gauss_seidel does instead of each (gauss_seidel.cpp)
-      const GrainsSettings def;
-      struct JacobiOnly {
-        const char* name;
-        bool toggle;  // else a float
-        double def;
-        const char* instead;
+      // the Jacobi path's own, and what gauss_seidel does instead of each (gauss_seidel.cpp)
+      static const std::pair<const char*, const char*> jacobi_only[] = {
+          {"accurate_friction", "its friction is each contact's own Coulomb cone in every pass"},
+          {"contact_memory", "it carries each contact's load from one substep to the next"},
+          {"chebyshev_rho", "its passes are not Jacobi iterations"},
+          {"update_collisions_during_iterations", "its contacts are found once a substep"},
+          {"update_neighbors_during_iterations", "its contacts are found once a substep"},
       };
-      const JacobiOnly jacobi_only[] = {
-          {"accurate_friction", true, def.accurate_friction ? 1.0 : 0.0,
-           "its friction is each contact's own Coulomb cone in every pass"},
-          {"contact_memory", false, def.contact_memory, "it carries each contact's load from one substep to the next"},
-          {"chebyshev_rho", false, def.chebyshev_rho, "its passes are not Jacobi iterations"},
-          {"update_collisions_during_iterations", true, def.update_collisions_during_iterations ? 1.0 : 0.0,
-           "its contacts are found once a substep"},
-          {"update_neighbors_during_iterations", true, def.update_neighbors_during_iterations ? 1.0 : 0.0,
-           "its contacts are found once a substep"},
-      };
-      for (const auto& [name, toggle, value, instead] : jacobi_only) {
+      const NodeTypeInfo* self = find_node_type("grains");
+      for (const auto& [name, instead] : jacobi_only) {
         if (!p.authored(name)) continue;
-        const double now = toggle ? (p.b(name) ? 1.0 : 0.0) : p.f(name);
-        if (float(now) == float(value) && !p.is_animated(name)) continue;  // the default, said again
+        const ParamDecl* d = self->find_param(name);
+        const double now = d->type == ParamType::Toggle ? (p.b(name) ? 1.0 : 0.0) : p.f(name);
+        // the declared default, said again (compared as the node reads it, a float)
+        if (float(now) == float(d->def[0]) && !p.is_animated(name)) continue;
         return {std::string(name) + " works with contact_solver jacobi only (gauss_seidel, the default: " +
                     instead + "); set contact_solver to jacobi or remove " + name,
                 name};

@@ -823,7 +823,8 @@ CLI::App* add_validation_command(CLI::App& app, ValidationOptions& o, int argc, 
                                     "fixed constraint iterations of every run (default: the plan's)")
                          ->check(positive_number());
   c->add_flag("--defaults", o.defaults,
-              "every run at the node and solver defaults, error control picking the substeps")
+              "every run at the node and solver defaults, error control picking the substeps (contact_solver "
+              "as --contact-solver says)")
       ->excludes(substeps)
       ->excludes(iterations);
   c->add_option("--friction", o.friction, "friction_with_particles of the collapse and silo runs")

@@ -197,13 +197,20 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // the warm start
   if (!seq_loads_.empty() && seq_dt_ > 0.0f) {
     const float scale = (dt / seq_dt_) * (dt / seq_dt_);
-    std::vector<float> load(seq_.size(), 0.0f), factor(seq_.size(), 0.0f);
-    std::vector<gr_float3> tang(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f)), normal(seq_.size(), gr_make3(0.0f, 0.0f, 0.0f));
-    for (size_t k = 0; k < seq_.size(); ++k) {
+    const size_t m = seq_.size();
+    const gr_float3 zero = gr_make3(0.0f, 0.0f, 0.0f);
+    std::vector<float>& load = warm_load_;
+    std::vector<float>& factor = warm_factor_;
+    std::vector<gr_float3>& tang = warm_tang_;
+    std::vector<gr_float3>& normal = warm_normal_;
+    load.assign(m, 0.0f);
+    factor.assign(m, 0.0f);
+    tang.assign(m, zero);
+    normal.assign(m, zero);
+    for (size_t k = 0; k < m; ++k) {
       const SeqContact& q = seq_[k];
-      auto it = std::lower_bound(seq_loads_.begin(), seq_loads_.end(), q.key,
-                                 [](const SeqLoad& l, uint64_t key) { return l.key < key; });
-      if (it == seq_loads_.end() || it->key != q.key) continue;
+      const SeqLoad* it = find_load(q.key);
+      if (!it) continue;
       gr_float3& nrm = normal[k];
       geometry(q, &nrm);
       // stored on the grain of the lower id
@@ -213,9 +220,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       factor[k] = load[k] > 0.0f ? 1.0f : 0.0f;
     }
     // what the loads, each scaled by its factor, give every grain (D)
-    std::vector<gr_float3> repeat(n);
+    std::vector<gr_float3>& repeat = warm_repeat_;
     auto sum_repeat = [&] {
-      std::fill(repeat.begin(), repeat.end(), gr_make3(0.0f, 0.0f, 0.0f));
+      repeat.assign(n, zero);
       for (size_t k = 0; k < seq_.size(); ++k) {
         if (!(factor[k] > 0.0f)) continue;
         const SeqContact& q = seq_[k];
@@ -225,8 +232,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       }
     };
     sum_repeat();
-    std::vector<float> balance(n, 0.0f);
-    std::vector<gr_float3> external(n, gr_make3(0.0f, 0.0f, 0.0f));  // G_i
+    std::vector<float>& balance = warm_balance_;
+    std::vector<gr_float3>& external = warm_external_;  // G_i
+    balance.assign(n, 0.0f);
+    external.assign(n, zero);
     for (int i = 0; i < ni; ++i) {
       if (!(g.inv_mass[i] > 0.0f)) {
         balance[i] = 1.0f;  // fixed grains do not move: they take any load
@@ -251,7 +260,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // left (a round cuts at least one). With |G| alone the cuts ran down the DEM column from
     // every grain that was moving and it slumped to H / L0 1.54; at r / 4 a 200-grain column
     // under mass-shock scaling gained energy (docs/heap-angle.md).
-    std::vector<uint8_t> cold(n, 0);
+    std::vector<uint8_t>& cold = warm_cold_;
+    cold.assign(n, 0);
     for (bool cut = true; cut;) {
       cut = false;
       sum_repeat();
@@ -361,9 +371,37 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
     seq_loads_.push_back({q.key, q.ln, {sign * q.lt[0], sign * q.lt[1], sign * q.lt[2]}});
   }
-  std::sort(seq_loads_.begin(), seq_loads_.end(),
-            [](const SeqLoad& a, const SeqLoad& b) { return a.key < b.key; });
+  index_loads();
   seq_dt_ = dt;
+}
+
+namespace {
+inline size_t load_slot(uint64_t key, int bits) {
+  return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> (64 - bits));
+}
+}  // namespace
+
+void GrainsSolver::index_loads() {
+  int bits = 4;
+  while ((size_t(1) << bits) < 2 * seq_loads_.size()) ++bits;
+  seq_table_.assign(size_t(1) << bits, 0u);
+  seq_table_bits_ = bits;
+  const size_t mask = seq_table_.size() - 1;
+  for (size_t k = 0; k < seq_loads_.size(); ++k) {
+    size_t h = load_slot(seq_loads_[k].key, bits);
+    while (seq_table_[h]) h = (h + 1) & mask;
+    seq_table_[h] = static_cast<uint32_t>(k + 1);
+  }
+}
+
+const GrainsSolver::SeqLoad* GrainsSolver::find_load(uint64_t key) const {
+  if (seq_table_.empty()) return nullptr;
+  const size_t mask = seq_table_.size() - 1;
+  for (size_t h = load_slot(key, seq_table_bits_); seq_table_[h]; h = (h + 1) & mask) {
+    const SeqLoad& l = seq_loads_[seq_table_[h] - 1];
+    if (l.key == key) return &l;
+  }
+  return nullptr;
 }
 
 }  // namespace grains

@@ -653,6 +653,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     gauss_seidel(c);
   } else {
     seq_loads_.clear();
+    seq_table_.clear();
     iterate(c);
   }
 
@@ -1284,7 +1285,9 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
       uint32_t j = neighbors_.indices[k];
       if (j <= i) continue;
       float rsum = radius_[i] + radius_[j];
-      float overlap = rsum - length(pi - load3(d.P, j));
+      const Vec3 dij = pi - load3(d.P, j);
+      if (!(dot(dij, dij) < rsum * rsum)) continue;  // apart, without a square root
+      float overlap = rsum - length(dij);
       if (overlap <= 0) continue;
       float pen = overlap / rsum;
       stats->max_penetration = std::max(stats->max_penetration, pen);
@@ -1398,6 +1401,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.section("grains loads");
   r.value(seq_dt_);
   r.array(seq_loads_);
+  index_loads();
 }
 
 // ---- contact history ----

@@ -252,6 +252,15 @@ class GrainsSolver {
   std::vector<SeqContact> seq_;
   std::vector<SeqLoad> seq_loads_;
   float seq_dt_ = 0;  // the substep the loads were built in
+  // seq_loads_ by key: an open-addressed table of indices + 1 (0: empty), a power of two long
+  std::vector<uint32_t> seq_table_;
+  int seq_table_bits_ = 0;
+  void index_loads();
+  const SeqLoad* find_load(uint64_t key) const;
+  // the warm start's per-contact and per-grain working arrays, kept between substeps
+  std::vector<float> warm_load_, warm_factor_, warm_balance_;
+  std::vector<gr_float3> warm_tang_, warm_normal_, warm_repeat_, warm_external_;
+  std::vector<uint8_t> warm_cold_;
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   // the history saved at the end of the last substep, by grain in that substep's order: the id
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once

@@ -75,27 +75,40 @@ struct LawSettings {
   // picking them each frame): the plan's (0, 0) setting
   bool error_control = false;
   double friction = 0.5;  // grains.friction_with_particles
-  // grains.contact_solver: the Jacobi path, on which VALIDATION.md's figures were measured;
-  // with gauss_seidel (the node's default) the quick plan's lattice columns of a <= 1 hardly
-  // slump and the repose hopper jams (docs/heap-angle.md)
-  std::string contact_solver = "jacobi";
+  // grains.contact_solver; empty: the node's default (contact_solver_of)
+  std::string contact_solver;
 };
 
-// Axisymmetric column collapse (Lube et al. 2004; Lajeunesse et al. 2004): a cylinder of radius
-// R0 = radius_grains d and height H0 = round(aspect radius_grains) d is released at once on a
-// rough floor; run-out (R_inf - R0) / R0 measured by deposit_radius once the deposit stopped.
+// Axisymmetric column collapse (Lube et al. 2004; Lajeunesse et al. 2004): a loose jittered
+// lattice (kCollapseSpacing d apart) carved to a cylinder of radius R0 = radius_grains d falls
+// and settles in a frictionless tube (a mesh collider of radius R0 + d/2) on a rough bed of fixed
+// grains (data/rough_bed.ply) into a random packing; when it has come to rest the tube widens a
+// hundredfold and the column collapses. Run-out (R_inf - R0) / R0 measured by deposit_radius
+// once the deposit stopped. The lattice is built 1 / kCollapseCompaction times the planned
+// height so that the settled column stands about aspect x R0; `aspect` is what it measured.
+constexpr double kCollapseSpacing = 1.35;     // lattice spacing / d
+constexpr double kCollapseCompaction = 0.36;  // settled / built height (0.34-0.41 at a > 1)
+constexpr double kBedRadius = 1.18;           // m: data/rough_bed.ply's, less a grain
 struct CollapseResult {
-  double aspect = 0;      // H0 / R0 as built
-  double r0 = 0, h0 = 0;  // m
+  double planned = 0;     // the aspect ratio asked for
+  double aspect = 0;      // H0 / R0 of the settled column at release
+  // m; h0 the settled column's height at release: the median over 8 sectors of the highest
+  // grain top (pile_slope's height: a grain bouncing on the column does not count)
+  double r0 = 0, h0 = 0;
+  double release = 0;     // s: the tube widens after this frame
+  double h_built = 0;     // m, the lattice's height
   size_t grains = 0;
-  double r0_measured = 0;    // deposit_radius of the column at the end of frame 1 (m)
+  double r0_measured = 0;    // deposit_radius of the column at release (m)
   double r_inf = 0;          // deposit_radius at the last frame (m)
   double r_inf_earlier = 0;  // the same 0.25 s before: the run-out had stopped if they agree
   double runout = 0;         // (r_inf - r0) / r0
-  double h_inf = 0;          // final deposit height (m)
+  double h_inf = 0;          // final deposit height (m), as h0
   int frames = 0;
   double seconds = 0;  // wall time of the run
 };
+// The contact solver a run uses: s.contact_solver, or the grains node's declared default.
+std::string contact_solver_of(const LawSettings& s);
+
 CollapseResult run_collapse(const std::string& scene, double aspect, int radius_grains,
                             const LawSettings& s, int threads);
 
@@ -152,9 +165,10 @@ struct ReposeSize {
   int hopper_grains = 12;      // inner width / d
   int fill_grains = 18;        // fill height / d
   int orifice_grains = 6;      // hole / d
-  double hopper_floor = 0.36;  // m
-  double bed_radius = 0.45;    // m, of the rough bed kept (the file's is 0.6 m)
+  double hopper_floor = 0.36;  // m: the hole's height
+  double bed_radius = 0.45;    // m, of the rough bed kept (the file's is 1.2 m)
   int frames = 144;
+  double funnel_deg = 60;  // the funnel's plates from the horizontal
 };
 ReposeResult run_repose(const std::string& scene, double friction, const ReposeSize& size,
                         const LawSettings& s, int threads);
@@ -164,8 +178,9 @@ ReposeResult run_repose(const std::string& scene, double friction, const ReposeS
 
 struct ValidationPlan {
   LawSettings settings;  // d and friction; substeps and iterations come from solver_settings
-  // (substeps, iterations) each experiment runs at: 8 x 40 fixed (bench's converged reference)
-  // and, in the full plan, (0, 0), the node and solver defaults with error control, beside it
+  // (substeps, iterations) each experiment runs at: (0, 0), the node and solver defaults with
+  // error control (what a user gets, and the quick plan's), and in the full plan 8 x 40 fixed
+  // beside it
   std::vector<std::pair<int, int>> solver_settings;
   std::vector<double> aspects;  // column collapse aspect ratios
   int column_radius_grains = 10;
@@ -175,6 +190,9 @@ struct ValidationPlan {
   ReposeSize pile;
 };
 ValidationPlan validation_plan(bool quick);
+// The settings of one of a plan's solver_settings: (0, 0) the node and solver defaults with error
+// control (their declared substeps and iterations), else those fixed substeps and iterations.
+LawSettings law_settings(const ValidationPlan& plan, std::pair<int, int> solver_setting);
 
 // Published expectations (bench/validation/README.md).
 double lube2004_runout(double a);        // 1.24 a (a <= 1.7), 1.6 a^(1/2) above

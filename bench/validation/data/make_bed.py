@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Writes rough_bed.ply for bench/validation/angle_of_repose.json: a disc of radius 0.6 m of
+"""Writes rough_bed.ply for bench/validation/angle_of_repose.json and column_collapse.json: a disc of radius 1.2 m of
 fixed grains (mass 0, so nothing moves them) on a square lattice of spacing 0.02 m, resting on
 y = 0 (centres at y = 0.01, pscale 0.01). Poured grains stand on it as on the rough base of fixed
 spheres that DEM angle-of-repose studies use, so the colliders can stay frictionless."""
 import os
 
 here = os.path.dirname(os.path.abspath(__file__))
-d, radius = 0.02, 0.6
+d, radius = 0.02, 1.2
 n = int(radius / d)
 points = []
 for i in range(-n, n + 1):

@@ -530,8 +530,10 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
   // toward where it came from still finds the surface it moved away from. Up to GR_MAX_PLANES
   // candidates are kept, nearest first (ties by collider order). Two passes: count (row sizes),
-  // then fill the compact rows; each grain writes only its own row.
+  // then fill the compact rows; each grain writes only its own row. A fixed grain (mass 0) has
+  // none: nothing moves it, a collider through it neither.
   auto nearest = [&](long i, float* dist, Vec3* nrm, int32_t* idx) {
+    if (!(inv_mass_[i] > 0.0f)) return 0;
     Vec3 x = load3(p, i) + origin;  // colliders live in world space
     float range = query_scale * radius[i] + length(load3(p, i) - load3(P, i));
     int count = 0;
@@ -1238,7 +1240,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     const Vec3 v_loop = v;
     int32_t hit = -1;
     Vec3 hit_n;
-    if (final_test) {
+    if (final_test && inv_mass_[i] > 0.0f) {  // a fixed grain stays where it is
       SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
                        s.static_threshold, s.scale_kinetic};
       final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,

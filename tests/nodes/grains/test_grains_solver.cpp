@@ -307,6 +307,29 @@ TEST_CASE("final collision test keeps a 100 m/s grain out of a thin box", "[grai
     }
 }
 
+TEST_CASE("a fixed grain (mass 0) inside a collider stays where it is", "[grains][colliders]") {
+  // Mass 0 means nothing moves the grain (a rough bed of fixed grains, a pinned anchor): a
+  // collider that passes through it must not push it out, on either contact solver, whether
+  // the final collision test is on or off. Half a radius inside a box's face, exactly where it
+  // was after 0.25 s.
+  for (int solver : {kContactJacobi, kContactGaussSeidel})
+    for (bool final_test : {true, false}) {
+      Scene sc;
+      sc.s = settings(24, 4, 10);
+      sc.s.contact_solver = solver;
+      sc.s.final_collision_test = final_test;
+      sc.add_collider(box({0, 0, 0}, {0.2f, 0.2f, 0.2f}));
+      const Vec3 at{0.1f - 0.005f, 0.05f, 0};
+      sc.add(at, 0.01f, 0.0f);
+      sc.run(0.25f);
+      INFO("solver " << solver << ", final test " << final_test << ": moved "
+                     << length(sc.pos(0) - at));
+      CHECK(sc.pos(0).x == at.x);
+      CHECK(sc.pos(0).y == at.y);
+      CHECK(sc.pos(0).z == at.z);
+    }
+}
+
 TEST_CASE("the final collision test applies collider friction to a grain it stops",
           "[grains][colliders][friction]") {
   // The grain of the test above, now oblique: 100 m/s into the thin box's face and 173.2 m/s

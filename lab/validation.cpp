@@ -50,10 +50,7 @@ std::string contact_solver_of(const LawSettings& s) {
   const NodeTypeInfo* info = find_node_type("grains");
   const ParamDecl* decl = info ? info->find_param("contact_solver") : nullptr;
   if (!decl) throw std::logic_error("no parameter grains.contact_solver");
-  if (!decl->def_string.empty()) return decl->def_string;
-  const size_t k = static_cast<size_t>(decl->def[0]);
-  if (k >= decl->menu.size()) throw std::logic_error("grains.contact_solver has no default choice");
-  return decl->menu[k];
+  return decl->def_string;  // a menu's default choice (ParamDecl::menu_of)
 }
 
 namespace {
@@ -193,18 +190,15 @@ ParticleStore moving_grains(const ParticleStore& pts, double y_max = 1e30) {
 PileSlope pile_slope(const ParticleStore& pts, double cx, double cz, double d, double y_max,
                      int sectors) {
   PileSlope out;
-  const float* P = pts.v3_if("P");
-  const float* ps = pts.f_if("pscale");
-  const float* mass = pts.f_if("mass");
-  if (!P || pts.size() == 0 || sectors < 1) return out;
+  if (!pts.v3_if("P") || pts.size() == 0 || sectors < 1) return out;
   // the moving grains below y_max (fixed grains, mass 0, are the bed, not the pile)
-  std::vector<size_t> keep;
-  for (size_t k = 0; k < pts.size(); ++k)
-    if (P[3 * k + 1] <= y_max && (!mass || mass[k] > 0)) keep.push_back(k);
-  out.radius = deposit_radius(moving_grains(pts, y_max), cx, cz, d);
+  const ParticleStore pile = moving_grains(pts, y_max);
+  const float* P = pile.v3_if("P");
+  const float* ps = pile.f_if("pscale");
+  out.radius = deposit_radius(pile, cx, cz, d);
   // top[s][b]: highest grain top in sector s, ring b (d wide); -1 where empty
   std::vector<std::vector<double>> top(sectors);
-  for (size_t k : keep) {
+  for (size_t k = 0; k < pile.size(); ++k) {
     double x = P[3 * k] - cx, z = P[3 * k + 2] - cz, y = P[3 * k + 1] + (ps ? ps[k] : d / 2);
     double phi = std::atan2(z, x) + kPi;  // [0, 2 pi]
     int s = std::min(sectors - 1, static_cast<int>(phi / (2 * kPi) * sectors));

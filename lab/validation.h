@@ -87,7 +87,7 @@ struct LawSettings {
 // once the deposit stopped. The lattice is built 1 / kCollapseCompaction times the planned
 // height so that the settled column stands about aspect x R0; `aspect` is what it measured.
 constexpr double kCollapseSpacing = 1.35;     // lattice spacing / d
-constexpr double kCollapseCompaction = 0.36;  // settled / built height (0.34-0.41 at a > 1)
+constexpr double kCollapseCompaction = 0.36;  // settled / built height (full plan: 0.31-0.37 above a = 1, 0.43 at 0.58)
 constexpr double kBedRadius = 1.18;           // m: data/rough_bed.ply's, less a grain
 struct CollapseResult {
   double planned = 0;     // the aspect ratio asked for

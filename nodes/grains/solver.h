@@ -237,6 +237,7 @@ class GrainsSolver {
   struct SeqContact {
     int32_t i, j;   // j < 0: collider plane entry e
     uint32_t e;
+    uint32_t moves;  // bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written
     uint64_t key;
     float k;        // correction scale (repulsion weight x stiffness fraction; planes 1)
     float share;    // i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest
@@ -250,6 +251,14 @@ class GrainsSolver {
     float lt[3];
   };
   std::vector<SeqContact> seq_;
+  // seq_ in blocks of grains, the blocks in colours (colour_blocks): block b's contacts are
+  // seq_[block_start_[b], block_start_[b + 1]); colour c's blocks are
+  // colour_blocks_[colour_start_[c], colour_start_[c + 1]), ascending
+  std::vector<uint32_t> block_start_, colour_blocks_, colour_start_;
+  std::vector<uint64_t> block_links_;  // linked blocks (lower << 32 | higher), sorted
+  std::vector<uint32_t> block_link_start_, block_link_to_;
+  std::vector<int32_t> block_colour_;
+  void colour_blocks();
   std::vector<SeqLoad> seq_loads_;
   float seq_dt_ = 0;  // the substep the loads were built in
   // seq_loads_ by key: an open-addressed table of indices + 1 (0: empty), a power of two long

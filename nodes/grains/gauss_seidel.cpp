@@ -440,16 +440,19 @@ void GrainsSolver::colour_blocks() {
   const uint32_t blocks = static_cast<uint32_t>((n_ + kBlockGrains - 1) / kBlockGrains);
   block_start_.assign(size_t(blocks) + 1, 0u);
   block_links_.clear();
+  // a pair's j is above its i, so bj >= bi; the contacts come by bi, so a link already made
+  // from bi to bj is the one stamped bi + 1 on bj
+  block_linked_.assign(blocks, 0u);
   for (const SeqContact& q : seq_) {
     const uint32_t bi = static_cast<uint32_t>(q.i) / kBlockGrains;
     ++block_start_[bi + 1];
     if (!(q.moves & 2u)) continue;
     const uint32_t bj = static_cast<uint32_t>(q.j) / kBlockGrains;
-    if (bi != bj) block_links_.push_back((uint64_t(std::min(bi, bj)) << 32) | std::max(bi, bj));
+    if (bi == bj || block_linked_[bj] == bi + 1) continue;
+    block_linked_[bj] = bi + 1;
+    block_links_.push_back((uint64_t(bi) << 32) | bj);
   }
   for (uint32_t b = 0; b < blocks; ++b) block_start_[b + 1] += block_start_[b];
-  std::sort(block_links_.begin(), block_links_.end());
-  block_links_.erase(std::unique(block_links_.begin(), block_links_.end()), block_links_.end());
   // the links both ways, by block
   block_link_start_.assign(size_t(blocks) + 1, 0u);
   for (const uint64_t l : block_links_) {

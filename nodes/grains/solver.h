@@ -255,7 +255,8 @@ class GrainsSolver {
   // seq_[block_start_[b], block_start_[b + 1]); colour c's blocks are
   // colour_blocks_[colour_start_[c], colour_start_[c + 1]), ascending
   std::vector<uint32_t> block_start_, colour_blocks_, colour_start_;
-  std::vector<uint64_t> block_links_;  // linked blocks (lower << 32 | higher), sorted
+  std::vector<uint64_t> block_links_;  // linked blocks (lower << 32 | higher), each once
+  std::vector<uint32_t> block_linked_;  // (blocks) the last lower block + 1 linked to each
   std::vector<uint32_t> block_link_start_, block_link_to_;
   std::vector<int32_t> block_colour_;
   void colour_blocks();

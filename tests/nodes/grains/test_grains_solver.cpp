@@ -362,10 +362,9 @@ TEST_CASE("the final collision test applies collider friction to a grain it stop
 
 namespace {
 
-// 512 grains of mixed sizes settling on the ground for 40 substeps, on 1 and 2 threads, with
-// `setup` applied to the settings: the states must match bit for bit.
-// side^3 grains in a jittered lattice fall on the ground for 40 substeps at 1 thread and at
-// each of `others`: the positions must match bit for bit
+// side^3 grains of mixed sizes (512 by default) in a jittered lattice settle on the ground for
+// 40 substeps with `setup` applied to the settings, on 1 thread and on each of `others`: the
+// positions must match bit for bit.
 void check_threads(void (*setup)(GrainsSettings&), int side = 8, std::vector<int> others = {2}) {
   auto run = [&](int threads) {
     Scene sc;
@@ -411,11 +410,10 @@ TEST_CASE("results are bit-identical for 1 and 2 threads", "[grains][determinism
 
 TEST_CASE("with the contacts one at a time, results are bit-identical for 1 and 2 threads",
           "[grains][determinism][gauss_seidel]") {
-  // contact_solver gauss_seidel projects the contacts in colours (no two of a colour move the
-  // same grain), a colour shared out among the threads: 512 grains make over kParallelContacts
-  // contacts, so the two runs take the parallel and the serial sweep; clumping (the Jacobi pass
-  // after each sweep) is threaded per grain, and the loads carried between substeps are keyed by
-  // ids
+  // contact_solver gauss_seidel sweeps its contacts by blocks of grains in colours: 512 grains
+  // are one block but make over kParallelContacts contacts, so the two runs take the threaded
+  // and the serial sweep (concurrent blocks: the next test); clumping (the Jacobi pass after
+  // each sweep) is threaded per grain, and the loads carried between substeps are keyed by ids
   check_threads([](GrainsSettings& s) {
     s.contact_solver = kContactGaussSeidel;
     s.clumping_weight = 0.2f;

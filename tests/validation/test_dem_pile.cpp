@@ -21,6 +21,7 @@ using namespace grains;
 namespace {
 
 constexpr double kDemAngle = 55.4, kDemSpread = 5.0;                  // frozen rotation
+constexpr double kDemCone = 51.5;  // the same heap's cone: atan(peak / foot radius)
 constexpr double kDemFrictionless = 27.0, kDemFrictionlessSpread = 8.0;
 
 // seed 0: the graph's own (5)
@@ -77,4 +78,8 @@ TEST_CASE("DEM pile: the rough-base heap at the defaults, and without friction",
   // defaults, the contacts one at a time with their loads carried: 47.6 and 56.1 deg, mean 51.9
   // (the Jacobi average of POP Grains, contact_solver jacobi, one pour: 49.0; docs/heap-angle.md)
   CHECK(std::fabs(h.angle_deg - kDemAngle) <= 5.0);
+  // each pour's cone, which one pour's chaos moves far less than its flank, within the same 5 deg
+  // of DEM's
+  CHECK(std::fabs(a.cone_deg - kDemCone) <= 5.0);
+  CHECK(std::fabs(b.cone_deg - kDemCone) <= 5.0);
 }

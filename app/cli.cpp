@@ -233,10 +233,7 @@ int cmd_run(RunRequest req) {
   if (!req.graph_given && req.resume.empty())
     throw LoadError("grains run", "", "a graph is required: name a graph file, or --resume DIR");
   std::vector<Override> overrides = parse_overrides(req.sets);
-  if (req.opencl) {  // the device runs the Jacobi path only
-    overrides.push_back(Override{"", "use_opencl", "true", "grains"});
-    overrides.push_back(Override{"", "contact_solver", "jacobi", "grains"});
-  }
+  if (req.opencl) overrides.push_back(Override{"", "use_opencl", "true", "grains"});
   Graph g = load_graph(req.graph, overrides);
   if (req.frames > 0) g.frames = req.frames;
   spdlog::debug("graph {}: {} nodes, {} solvers, {} frames at {:g} fps", req.graph, g.nodes.size(),
@@ -495,8 +492,8 @@ int cli_main(int argc, char** argv) {
   run->add_option("--threads", threads, "worker threads (default: all cores)")
       ->check(CLI::Range(1, kMaxThreads));
   run->add_flag("--opencl", opencl,
-                "run every grains node on the OpenCL device: use_opencl on and contact_solver jacobi, the "
-                "device's solver (GRAINS_OPENCL_DEVICE=P:D picks the device)");
+                "run every grains node on the OpenCL device: use_opencl on (GRAINS_OPENCL_DEVICE=P:D picks "
+                "the device)");
   run->add_option("--set", sets, "NODE.PARAM=VALUE, overrides a parameter");
   add_verbosity_flags(run, quiet, verbose);
   auto* max_points_opt = run->add_option("--max-points", max_points,

@@ -10,7 +10,8 @@
 //
 // A contact c between grains i and j (j a plane for colliders) keeps two accumulators over the
 // substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
-// lt, the tangential one. A pass over c:
+// lt, the tangential one. A pass over c (gr_seq_pass, kernels/sequential.h, which the OpenCL
+// device runs too):
 //   normal:   C = |x_ij| - (r_i + r_j) (planes: (x_i - x_s) . n - r_i);
 //             ln' = max(0, ln - w k C) (it can take back what it pushed, never pull; w is
 //             over_relaxation, successive over-relaxation above 1);
@@ -58,6 +59,7 @@
 #include "nodes/grains/kernels/collider.h"
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/mass_shock.h"
+#include "nodes/grains/opencl/iterations.h"
 #include "nodes/grains/substep_context.h"
 
 namespace grains {
@@ -80,8 +82,6 @@ constexpr size_t kParallelContacts = 1024;
 
 // the component of a along the unit n removed
 inline gr_float3 tangential(gr_float3 a, gr_float3 n) { return gr_madd(a, n, -gr_dot(a, n)); }
-// a[i] += d s
-inline void move(float* a, int i, gr_float3 d, float s) { gr_store3(a, i, gr_madd(gr_load3(a, i), d, s)); }
 
 }  // namespace
 
@@ -146,32 +146,13 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
   }
 
-  // the contact's normal from i's side, and its gap C (< 0: overlap), at positions x
-  auto geometry_at = [&](const float* x, const SeqContact& q, gr_float3* nrm) -> float {
-    if (q.j < 0) {
-      *nrm = gr_plane_normal(&g, q.e);
-      return -gr_plane_penetration(&g, q.i, q.e, gr_load3(x, q.i));
-    }
-    const gr_float3 d = gr_sub(gr_load3(x, q.i), gr_load3(x, q.j));
-    const float dist = gr_length(d);
-    *nrm = gr_pair_normal(d, dist, q.i, q.j);
-    return dist - g.radius[q.i] - g.radius[q.j];
+  // the shared pass's parts (kernels/sequential.h), at positions x
+  auto geometry_at = [&](const float* x, const SeqContact& q, gr_float3* nrm) {
+    return gr_seq_geometry(&g, x, &q, nrm);
   };
   auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
-  // a grain pair apart at positions x, found without a square root: most of the search's
-  // candidates (in a settled packing two of three) never touch in the substep
-  auto apart_at = [&](const float* x, const SeqContact& q) {
-    if (q.j < 0) return false;
-    const gr_float3 d = gr_sub(gr_load3(x, q.i), gr_load3(x, q.j));
-    const float reach = g.radius[q.i] + g.radius[q.j];
-    return gr_dot(d, d) >= reach * reach;
-  };
-  // a fixed grain's share is 0 (its partner's 1): it is read, never written, so that blocks of
-  // one colour may share it
-  auto apply = [&](const SeqContact& q, gr_float3 d) {
-    if (q.moves & 1u) move(p, q.i, d, q.share);
-    if (q.moves & 2u) move(p, q.j, d, -(1.0f - q.share));
-  };
+  auto apart_at = [&](const float* x, const SeqContact& q) { return gr_seq_apart(&g, x, &q) != 0; };
+  auto apply = [&](const SeqContact& q, gr_float3 d) { gr_seq_apply(p, &q, d); };
   colour_blocks();
   // body(q) over every contact, colour by colour, block by block, a colour's blocks shared out
   // among the threads when there are enough contacts; returns the largest body returned
@@ -222,12 +203,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       if (!(C < 0.0f)) return 0.0f;
       const gr_float3 d = gr_scale(nrm, -q.k * C);
       if (q.moves & 1u) {
-        move(x, q.i, d, q.share);
-        move(p, q.i, d, q.share);
+        gr_seq_move(x, q.i, d, q.share);
+        gr_seq_move(p, q.i, d, q.share);
       }
       if (q.moves & 2u) {
-        move(x, q.j, d, -(1.0f - q.share));
-        move(p, q.j, d, -(1.0f - q.share));
+        gr_seq_move(x, q.j, d, -(1.0f - q.share));
+        gr_seq_move(p, q.j, d, -(1.0f - q.share));
       }
       return -q.k * C / g.radius[q.i];
     };
@@ -350,7 +331,37 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // over_relaxation: successive over-relaxation of the normal loads (omega > 1 pushes past the
   // contact, the next pass takes back what overshot)
   const float relax = prm.over_relaxation;
-  for (int it = 0; it < c.iterations; ++it) {
+  if (c.s.use_opencl) {
+    // the passes on the device, the same pass in the same order (opencl/iterations.h); shape
+    // matching stays here, so with shapes each pass is a call of its own and the pins follow
+    // the shapes here
+    opencl::SequentialContacts on;
+    on.contacts = seq_.data();
+    on.count = seq_.size();
+    on.block_start = block_start_.data();
+    on.blocks = block_start_.size() - 1;
+    on.colour_blocks = colour_blocks_.data();
+    on.colour_start = colour_start_.data();
+    on.colours = colour_start_.size() - 1;
+    on.relax = relax;
+    on.others = other_groups ? &others : nullptr;
+    on.others_prm = &others_prm;
+    opencl::Iterations& device = open_device();
+    const opencl::IterationSizes size = device_sizes(c);
+    if (!c.shapes_on) {
+      device.run_sequential(g, prm, size, p_.data(), on, c.iterations);
+    } else {
+      gr_grains unpinned = g;
+      unpinned.targetP = nullptr;
+      for (int it = 0; it < c.iterations; ++it) {
+        device.run_sequential(unpinned, prm, size, p_.data(), on, 1);
+        project_shapes(g, prm, c.threads);
+        if (g.targetP) project_pins(c);
+      }
+    }
+    p = p_.data();
+  }
+  for (int it = 0; it < c.iterations && !c.s.use_opencl; ++it) {
     if (other_groups) {
       const long ln = static_cast<long>(n);
       const gr_normal_sums none{nullptr, nullptr, nullptr, nullptr, nullptr};
@@ -364,39 +375,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       p = p_.data();
     }
     sweep([&](SeqContact& q) -> float {
-      if (!(q.ln > 0.0f) && apart_at(p, q)) return 0.0f;
-      gr_float3 nrm;
-      const float C = geometry(q, &nrm);
-      if (C >= 0.0f && !(q.ln > 0.0f)) return 0.0f;
-      const float ln = std::max(0.0f, q.ln - relax * q.k * C);
-      const gr_float3 dn = gr_scale(nrm, ln - q.ln);
-      q.ln = ln;
-      apply(q, dn);
-      if (!(ln > 0.0f) || !(q.mu > 0.0f)) {
-        // a contact without load holds no friction: the cone of a zero normal load is a point,
-        // and what it had rubbed this substep is given back
-        if (q.lt[0] != 0.0f || q.lt[1] != 0.0f || q.lt[2] != 0.0f) {
-          const gr_float3 back = gr_make3(-q.lt[0], -q.lt[1], -q.lt[2]);
-          q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;
-          apply(q, back);
-        }
-        return 0.0f;
-      }
-      gr_float3 u = gr_sub(gr_load3(p, q.i), gr_load3(P, q.i));
-      if (q.j >= 0) {
-        u = gr_sub(u, gr_sub(gr_load3(p, q.j), gr_load3(P, q.j)));
-      } else {
-        const float* pl = g.plane + 9 * q.e;
-        u = gr_sub(u, gr_scale(gr_make3(pl[6], pl[7], pl[8]), dt));
-      }
-      const gr_float3 lt0 = gr_make3(q.lt[0], q.lt[1], q.lt[2]);
-      // the substep's tangential correction so far must cancel its slip, within the contact's
-      // cone (gr_friction: static below static_threshold x mu ln, else cut to scale_kinetic x it)
-      const gr_float3 lt =
-          gr_friction(gr_sub(u, lt0), nrm, q.mu * ln, prm.static_threshold, prm.scale_kinetic);
-      const gr_float3 dt_move = gr_sub(lt, lt0);
-      q.lt[0] = lt.x, q.lt[1] = lt.y, q.lt[2] = lt.z;
-      apply(q, dt_move);
+      gr_seq_pass(&g, &prm, p, &q, relax);
       return 0.0f;
     });
     if (c.shapes_on) {

@@ -499,8 +499,8 @@ void register_grains_node() {
     return b;
   };
   // Refused: a parameter of the Jacobi path set with contact_solver gauss_seidel (it would have
-  // no effect), and use_opencl with gauss_seidel or on a machine without the device (or a
-  // GRAINS_OPENCL_DEVICE naming none)
+  // no effect), and use_opencl on a machine without the device (or a GRAINS_OPENCL_DEVICE
+  // naming none)
   t.check = [](const ParamSet& p, const std::string&) -> std::pair<std::string, std::string> {
     const bool gauss_seidel = p.choice("contact_solver") == kContactGaussSeidel;
     if (gauss_seidel) {
@@ -525,10 +525,6 @@ void register_grains_node() {
       }
     }
     if (!p.b("use_opencl")) return {"", ""};
-    if (gauss_seidel)
-      return {"the OpenCL device runs contact_solver jacobi only; set contact_solver to jacobi, or turn "
-              "use_opencl off",
-              "use_opencl"};
     opencl::DeviceChoice choice;
     std::string problem;
     if (!opencl::chosen_device(&choice, &problem)) return {problem, "use_opencl"};

@@ -607,9 +607,6 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noex
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
-  // the device runs the Jacobi path only (the node refuses the pair at load)
-  if (s.use_opencl && s.contact_solver == kContactGaussSeidel)
-    throw std::invalid_argument("use_opencl needs contact_solver jacobi");
   candidates_on_ = false;
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
@@ -1005,18 +1002,28 @@ void GrainsSolver::project_pins(SubstepContext& c) {
 // the iterations' loop runs its own otherwise)
 void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool friction_after,
                                  bool whole) {
-  const size_t n = n_;
-  opencl::IterationSizes size;
-  size.n = n;
-  size.pair_entries = c.g.nbr_offsets ? neighbors_.indices.size() : 0;
-  size.plane_entries = c.g.plane_offsets ? plane_offsets_[n] : 0;
-  size.prims = c.g.con_offsets ? c.d.prim_count : 0;
-  size.row_length = row_length_;
   gr_grains gd = c.g;
   if (!whole) gd.targetP = nullptr;
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
-  device_.device->run(gd, c.prm, size, x, c.acc, count, whole ? friction_pass : friction_after,
-                      whole ? c.s.accurate_friction : false);
+  open_device().run(gd, c.prm, device_sizes(c), x, c.acc, count, whole ? friction_pass : friction_after,
+                    whole ? c.s.accurate_friction : false);
+}
+
+// the device, opened at the first substep that asks for it
+opencl::Iterations& GrainsSolver::open_device() {
+  if (!device_.device) device_.device = std::make_unique<opencl::Iterations>();
+  return *device_.device;
+}
+
+// how much of each of the substep's arrays the device reads
+opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const {
+  opencl::IterationSizes size;
+  size.n = n_;
+  size.pair_entries = c.g.nbr_offsets ? neighbors_.indices.size() : 0;
+  size.plane_entries = c.g.plane_offsets ? plane_offsets_[n_] : 0;
+  size.prims = c.g.con_offsets ? c.d.prim_count : 0;
+  size.row_length = row_length_;
+  return size;
 }
 
 // the friction pass (gr_friction_pass) on every grain, p_ to p_ (through p_next_)
@@ -1055,7 +1062,7 @@ void GrainsSolver::iterate(SubstepContext& c) {
   const gr_params& prm = c.prm;
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
   const bool device = s.use_opencl;
-  if (device && !device_.device) device_.device = std::make_unique<opencl::Iterations>();
+  if (device) open_device();
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)

@@ -16,11 +16,13 @@
 #include "engine/neighbors.h"
 #include "engine/state_stream.h"
 #include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
+#include "nodes/grains/kernels/sequential.h"  // gr_seq_contact
 
 namespace grains {
 
 namespace opencl {
 class Iterations;
+struct IterationSizes;
 }
 
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
@@ -187,6 +189,8 @@ class GrainsSolver {
   void run_friction(SubstepContext& c);
   void project_pins(SubstepContext& c);
   void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole);
+  opencl::Iterations& open_device();
+  opencl::IterationSizes device_sizes(const SubstepContext& c) const;
 
   // Verlet reuse of the neighbour rows across substeps (keep_rows)
   void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
@@ -234,17 +238,8 @@ class GrainsSolver {
   std::vector<float> P_stable_, p_stable_next_;  // (n x 3 + 1) m
   // contact_solver gauss_seidel (gauss_seidel.cpp): this substep's contacts, and the loads the
   // last substep's contacts ended with, by key (sorted), for the warm start
-  struct SeqContact {
-    int32_t i, j;   // j < 0: collider plane entry e
-    uint32_t e;
-    uint32_t moves;  // bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written
-    uint64_t key;
-    float k;        // correction scale (repulsion weight x stiffness fraction; planes 1)
-    float share;    // i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest
-    float mu;       // friction scale (friction_with_particles or _colliders x the attribute)
-    float ln;       // normal correction applied in the substep (m of relative motion)
-    float lt[3];    // tangential correction applied in the substep (m), i's side
-  };
+  using SeqContact = gr_seq_contact;  // kernels/sequential.h
+  static_assert(sizeof(SeqContact) == 56, "the OpenCL device reads the same bytes");
   struct SeqLoad {
     uint64_t key;
     float ln;

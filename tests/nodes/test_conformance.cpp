@@ -299,13 +299,13 @@ std::map<std::string, Special> specials() {
       {"grains.max_acceleration", {json::object(), 5}},
       {"grains.max_neighbors", {json::object(), 2}},
       {"grains.internal_collisions_stiffness", {json::object(), 2}},
-      // the Jacobi path's own (refused with the default gauss_seidel) and the device, which runs it
+      // the Jacobi path's own (refused with the default gauss_seidel)
       {"grains.accurate_friction", {{{"contact_solver", "jacobi"}}, nullptr}},
       {"grains.contact_memory", {{{"contact_solver", "jacobi"}}, nullptr}},
       {"grains.chebyshev_rho", {{{"contact_solver", "jacobi"}}, nullptr}},
       {"grains.update_collisions_during_iterations", {{{"contact_solver", "jacobi"}}, nullptr}},
       {"grains.update_neighbors_during_iterations", {{{"contact_solver", "jacobi"}}, nullptr}},
-      {"grains.use_opencl", {{{"contact_solver", "jacobi"}}, nullptr}},
+      {"grains.use_opencl", {json::object(), nullptr}},
       // with gauss_seidel the contacts are not averaged (only explicit constraints and clumping,
       // which the heap has not)
       {"grains.disable_constraint_averaging", {{{"contact_solver", "jacobi"}}, nullptr}},

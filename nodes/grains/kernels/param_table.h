@@ -118,12 +118,12 @@ GR_PARAM(FLOAT, chebyshev_rho, 0, HOST, .range(0, 0.95),
          "spectral radius of the Jacobi iteration, 0 = off; piles take 0.9-0.95, higher diverged (contact_solver "
          "jacobi only)")
 GR_PARAM(MENU, contact_solver, 1, HOST, .menu_of({"jacobi", "gauss_seidel"}),
-         "gauss_seidel (the default; not in POP Grains, CPU only): contacts and collider planes one at a "
+         "gauss_seidel (the default; not in POP Grains): contacts and collider planes one at a "
          "time, each with its own Coulomb cone, their loads carried to the next substep, over_relaxation "
          "scaling each normal step; error control keeps a grain's motion a substep under r / 4 and a "
          "resting fall under r / 256. jacobi: every grain averages its contacts' corrections, as POP "
          "Grains; accurate_friction, contact_memory, chebyshev_rho and the updates during iterations work "
-         "with it only (set with gauss_seidel they are refused), and use_opencl needs it")
+         "with it only (set with gauss_seidel they are refused)")
 GR_PARAM(TOGGLE, pre_stabilization, 1, HOST, ,
          "remove the overlap grains start a substep with, without turning it into velocity (Macklin et al. 2014 sec. 4.4)")
 GR_PARAM(TOGGLE, update_collisions_during_iterations, 0, HOST, ,
@@ -147,4 +147,5 @@ GR_PARAM(TOGGLE, enable_collision_feedback, 0, HOST, ,
          "accumulate the force and torque the grains put on each collider (DIR/colliders.csv)")
 /* the OpenCL backend (opencl/iterations.h) */
 GR_PARAM(TOGGLE, use_opencl, 0, HOST, ,
-         "run the iterations, friction passes and pins on an OpenCL device: GRAINS_OPENCL_DEVICE=P:D picks it (`grains devices` lists them)")
+         "run the iterations (either contact_solver's passes), friction passes and pins on an OpenCL device: "
+         "GRAINS_OPENCL_DEVICE=P:D picks it (`grains devices` lists them)")

@@ -11,6 +11,7 @@
 #include "mass_shock.h"
 #include "params.h"
 #include "pin.h"
+#include "sequential.h"
 #include "velocity.h"
 
 /* The per-grain arrays of gr_grains as kernel arguments (a kernel argument cannot hold pointers
@@ -115,4 +116,22 @@ __kernel void gr_k_pin(gr_params prm, __global const float* targetP,
   g.targetweight = targetweight;
   g.targetstiffness = targetstiffness;
   gr_store3(p, i, gr_project_pin(&g, &prm, p, i));
+}
+
+/* contact_solver gauss_seidel's pass over one colour of blocks (gauss_seidel.cpp): work-item t
+ * sweeps block blocks[first + t]'s contacts in their order, in place (gr_seq_pass, the CPU's
+ * pass); no two blocks of a colour write one grain, so the result is the CPU's order's whatever
+ * the device's schedule */
+__kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
+                              __global gr_seq_contact* seq, __global const gr_uint* block_start,
+                              __global const gr_uint* blocks, int first, int count, float relax) {
+  const int t = (int)get_global_id(0);
+  gr_uint b, k, e;
+  if (t >= count) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    b = blocks[first + t];
+    e = block_start[b + 1];
+    for (k = block_start[b]; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + k, relax);
+  }
 }

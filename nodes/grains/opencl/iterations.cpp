@@ -49,6 +49,42 @@ constexpr cl_uint kScalars = 3;                 // uniform_radius, uniform_inv_m
 constexpr size_t kGroup = 64;                  // work-items a work-group
 constexpr cl_uint kFirstOwn = 1 + kArrays + kScalars;  // after prm, the arrays and the scalars
 
+// one array of gr_grains on the host and how much of it the device reads
+struct HostArray {
+  const void* host;
+  size_t bytes;
+};
+
+// g's arrays in Array order (null where g has none)
+void grain_arrays(const gr_grains& g, const IterationSizes& size, HostArray* out) {
+  const size_t n = size.n, f = sizeof(float), u = sizeof(gr_uint);
+  const HostArray a[] = {
+      {g.P, 3 * n * f},
+      {g.radius, n * f},
+      {g.inv_mass, n * f},
+      {g.mass, n * f},
+      {g.friction, n * f},
+      {g.repulsionweight, n * f},
+      {g.repulsionstiffness, n * f},
+      {g.attractionweight, n * f},
+      {g.attractionstiffness, n * f},
+      {g.nbr_offsets, (n + 1) * u},
+      {g.nbr_indices, size.pair_entries * u},
+      {g.pair_slip, 3 * size.pair_entries * f},
+      {g.plane_offsets, (n + 1) * u},
+      {g.plane, 9 * size.plane_entries * f},
+      {g.plane_slip, 3 * size.plane_entries * f},
+      {g.con_offsets, (n + 1) * u},
+      {g.con_other, 2 * size.prims * u},
+      {g.con_prim, 2 * size.prims * u},
+      {g.restlength, size.prims * f},
+      {g.constraintweight, n * f},
+      {g.constraintstiffness, n * f},
+  };
+  static_assert(sizeof(a) / sizeof(a[0]) == kArrays, "one input per array");
+  std::copy(a, a + kArrays, out);
+}
+
 }  // namespace
 
 struct Iterations::Impl {
@@ -56,17 +92,19 @@ struct Iterations::Impl {
   cl_context ctx = nullptr;
   cl_command_queue queue = nullptr;
   cl_program program = nullptr;
-  cl_kernel iterate = nullptr, friction = nullptr, pin = nullptr;
+  // others: gr_k_iterate again, for gauss_seidel's constraints and clumping (its own arguments)
+  cl_kernel iterate = nullptr, friction = nullptr, pin = nullptr, others = nullptr, sequential = nullptr;
   Buffer arrays[kArrays];
   Buffer p, next, scratch, pair_sum, collider_sum, collider_dx, friction_dx;
   Buffer target, target_weight, target_stiffness;  // pins
+  Buffer seq, block_start, colour_blocks;         // gauss_seidel's contacts
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
-                      &target, &target_weight, &target_stiffness})
+                      &target, &target_weight, &target_stiffness, &seq, &block_start, &colour_blocks})
       b->release();
-    for (cl_kernel k : {iterate, friction, pin})
+    for (cl_kernel k : {iterate, friction, pin, others, sequential})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -85,6 +123,23 @@ struct Iterations::Impl {
     check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, 0, bytes, host, 0, nullptr, nullptr),
           "clEnqueueReadBuffer");
   }
+
+  // g's arrays (grain_arrays, into a) to `arrays` and the positions p to `p`, once a call;
+  // `next` made room for the passes that swap with p
+  void upload_grains(const gr_grains& g, const IterationSizes& size, const float* positions, HostArray* a) {
+    grain_arrays(g, size, a);
+    for (int k = 0; k < kArrays; ++k)
+      // positions: one float past the last grain, as the contact loop's block loads read
+      upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
+    const size_t bytes = (3 * size.n + 1) * sizeof(float);
+    upload(p, positions, bytes);
+    next.reserve(ctx, bytes);
+  }
+  // kernel k's first arguments: prm, the arrays `a` holds (null where it has none) and g's scalars
+  void set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a);
+  // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x
+  void set_pins(const gr_grains& g, const gr_params& prm, size_t n);
+  void project_pins(Buffer* x, size_t global);
 };
 
 namespace {
@@ -123,11 +178,45 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
   check(status, "clCreateKernel(gr_k_friction)");
   impl_->pin = clCreateKernel(impl_->program, "gr_k_pin", &status);
   check(status, "clCreateKernel(gr_k_pin)");
+  impl_->others = clCreateKernel(impl_->program, "gr_k_iterate", &status);
+  check(status, "clCreateKernel(gr_k_iterate)");
+  impl_->sequential = clCreateKernel(impl_->program, "gr_k_sequential", &status);
+  check(status, "clCreateKernel(gr_k_sequential)");
 }
 
 Iterations::~Iterations() = default;
 
 const std::string& Iterations::device_name() const { return impl_->name; }
+
+void Iterations::Impl::set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a) {
+  check(clSetKernelArg(k, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
+  for (int e = 0; e < kArrays; ++e) set_buffer(k, 1 + e, a[e].host ? &arrays[e] : nullptr);
+  const float ur = g.uniform_radius, uw = g.uniform_inv_mass;
+  const int unconstrained = g.nbr_unconstrained;
+  check(clSetKernelArg(k, 1 + kArrays, sizeof(float), &ur), "clSetKernelArg");
+  check(clSetKernelArg(k, 2 + kArrays, sizeof(float), &uw), "clSetKernelArg");
+  check(clSetKernelArg(k, 3 + kArrays, sizeof(int), &unconstrained), "clSetKernelArg");
+}
+
+void Iterations::Impl::set_pins(const gr_grains& g, const gr_params& prm, size_t n) {
+  const size_t f = sizeof(float);
+  upload(target, g.targetP, 3 * n * f);
+  upload(target_weight, g.targetweight, n * f);
+  upload(target_stiffness, g.targetstiffness, n * f);
+  const int count = static_cast<int>(n);
+  check(clSetKernelArg(pin, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
+  set_buffer(pin, 1, &target);
+  set_buffer(pin, 2, g.targetweight ? &target_weight : nullptr);
+  set_buffer(pin, 3, &target_stiffness);
+  check(clSetKernelArg(pin, 5, sizeof(int), &count), "clSetKernelArg");
+}
+
+void Iterations::Impl::project_pins(Buffer* x, size_t global) {
+  const size_t local = kGroup;
+  set_buffer(pin, 4, x);
+  check(clEnqueueNDRangeKernel(queue, pin, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+        "clEnqueueNDRangeKernel");
+}
 
 void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
                      const gr_normal_sums& acc, int iterations, bool friction_pass,
@@ -136,39 +225,8 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   const size_t n = size.n;
   if (n == 0) return;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
-  // the inputs, once a call, in Array order
-  const struct {
-    const void* host;
-    size_t bytes;
-  } inputs[] = {
-      {g.P, 3 * n * f},
-      {g.radius, n * f},
-      {g.inv_mass, n * f},
-      {g.mass, n * f},
-      {g.friction, n * f},
-      {g.repulsionweight, n * f},
-      {g.repulsionstiffness, n * f},
-      {g.attractionweight, n * f},
-      {g.attractionstiffness, n * f},
-      {g.nbr_offsets, (n + 1) * u},
-      {g.nbr_indices, size.pair_entries * u},
-      {g.pair_slip, 3 * size.pair_entries * f},
-      {g.plane_offsets, (n + 1) * u},
-      {g.plane, 9 * size.plane_entries * f},
-      {g.plane_slip, 3 * size.plane_entries * f},
-      {g.con_offsets, (n + 1) * u},
-      {g.con_other, 2 * size.prims * u},
-      {g.con_prim, 2 * size.prims * u},
-      {g.restlength, size.prims * f},
-      {g.constraintweight, n * f},
-      {g.constraintstiffness, n * f},
-  };
-  static_assert(sizeof(inputs) / sizeof(inputs[0]) == kArrays, "one input per array");
-  for (int a = 0; a < kArrays; ++a)
-    // positions: one float past the last grain, as the contact loop's block loads read
-    m.upload(m.arrays[a], inputs[a].host, inputs[a].bytes, a == kP ? inputs[a].bytes + f : 0);
-  m.upload(m.p, p, (3 * n + 1) * f);
-  m.next.reserve(m.ctx, (3 * n + 1) * f);
+  HostArray inputs[kArrays];
+  m.upload_grains(g, size, p, inputs);
   const bool pairs = acc.pair && g.nbr_offsets;
   if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f);
   m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
@@ -176,15 +234,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   m.upload(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
   m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
 
-  for (cl_kernel k : {m.iterate, m.friction}) {
-    check(clSetKernelArg(k, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
-    for (int a = 0; a < kArrays; ++a) set_buffer(k, 1 + a, inputs[a].host ? &m.arrays[a] : nullptr);
-    const float ur = g.uniform_radius, uw = g.uniform_inv_mass;
-    const int unconstrained = g.nbr_unconstrained;
-    check(clSetKernelArg(k, 1 + kArrays, sizeof(float), &ur), "clSetKernelArg");
-    check(clSetKernelArg(k, 2 + kArrays, sizeof(float), &uw), "clSetKernelArg");
-    check(clSetKernelArg(k, 3 + kArrays, sizeof(int), &unconstrained), "clSetKernelArg");
-  }
+  for (cl_kernel k : {m.iterate, m.friction}) m.set_grains(k, prm, g, inputs);
   const int count = static_cast<int>(n);
   const gr_uint row_length = static_cast<gr_uint>(size.row_length);
   // iterate: p, next, scratch, row_length, pair_sum, collider_sum, collider_dx, friction_dx, n
@@ -217,25 +267,11 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   };
   // pins (g.targetstiffness set): their own group after each iteration, in place, on `from`
   const bool pins = g.targetP && g.targetstiffness;
-  if (pins) {
-    m.upload(m.target, g.targetP, 3 * n * f);
-    m.upload(m.target_weight, g.targetweight, n * f);
-    m.upload(m.target_stiffness, g.targetstiffness, n * f);
-    check(clSetKernelArg(m.pin, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
-    set_buffer(m.pin, 1, &m.target);
-    set_buffer(m.pin, 2, g.targetweight ? &m.target_weight : nullptr);
-    set_buffer(m.pin, 3, &m.target_stiffness);
-    check(clSetKernelArg(m.pin, 5, sizeof(int), &count), "clSetKernelArg");
-  }
-  auto project_pins = [&] {
-    set_buffer(m.pin, 4, from);
-    check(clEnqueueNDRangeKernel(m.queue, m.pin, 1, nullptr, &global, &local, 0, nullptr, nullptr),
-          "clEnqueueNDRangeKernel");
-  };
+  if (pins) m.set_pins(g, prm, n);
   for (int it = 0; it < iterations; ++it) {
     pass(m.iterate);
     if (friction_pass && accurate_friction) pass(m.friction);
-    if (pins) project_pins();
+    if (pins) m.project_pins(from, global);
   }
   if (friction_pass && !accurate_friction) pass(m.friction);
 
@@ -244,6 +280,66 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
   m.download(m.friction_dx, acc.friction_dx, 3 * n * f);
+}
+
+void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                                float* p, const SequentialContacts& s, int iterations) {
+  Impl& m = *impl_;
+  const size_t n = size.n;
+  if (n == 0) return;
+  const size_t f = sizeof(float), u = sizeof(gr_uint);
+  HostArray inputs[kArrays];
+  m.upload_grains(g, size, p, inputs);
+  m.upload(m.seq, s.contacts, s.count * sizeof(gr_seq_contact));
+  m.upload(m.block_start, s.block_start, (s.blocks + 1) * u);
+  m.upload(m.colour_blocks, s.colour_blocks, s.blocks * u);
+
+  const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup;
+  Buffer* from = &m.p;
+  Buffer* to = &m.next;
+  // the others' Jacobi group: gr_k_iterate with their arrays and no sums
+  if (s.others) {
+    HostArray theirs[kArrays];
+    grain_arrays(*s.others, size, theirs);
+    m.set_grains(m.others, *s.others_prm, *s.others, theirs);
+    const int count = static_cast<int>(n);
+    const gr_uint none = 0;
+    for (cl_uint a = kFirstOwn + 2; a <= kFirstOwn + 7; ++a)
+      if (a == kFirstOwn + 3) check(clSetKernelArg(m.others, a, sizeof(gr_uint), &none), "clSetKernelArg");
+      else set_buffer(m.others, a, nullptr);
+    check(clSetKernelArg(m.others, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+  }
+  // the contacts: p, seq, block_start, blocks, first, count, relax (first and count by colour)
+  m.set_grains(m.sequential, prm, g, inputs);
+  set_buffer(m.sequential, kFirstOwn + 1, &m.seq);
+  set_buffer(m.sequential, kFirstOwn + 2, &m.block_start);
+  set_buffer(m.sequential, kFirstOwn + 3, &m.colour_blocks);
+  check(clSetKernelArg(m.sequential, kFirstOwn + 6, sizeof(float), &s.relax), "clSetKernelArg");
+  const bool pins = g.targetP && g.targetstiffness;
+  if (pins) m.set_pins(g, prm, n);
+  for (int it = 0; it < iterations; ++it) {
+    if (s.others) {
+      set_buffer(m.others, kFirstOwn, from);
+      set_buffer(m.others, kFirstOwn + 1, to);
+      check(clEnqueueNDRangeKernel(m.queue, m.others, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+            "clEnqueueNDRangeKernel");
+      std::swap(from, to);
+    }
+    set_buffer(m.sequential, kFirstOwn, from);
+    for (size_t c = 0; c < s.colours && s.count > 0; ++c) {
+      const int first = static_cast<int>(s.colour_start[c]);
+      const int count = static_cast<int>(s.colour_start[c + 1] - s.colour_start[c]);
+      check(clSetKernelArg(m.sequential, kFirstOwn + 4, sizeof(int), &first), "clSetKernelArg");
+      check(clSetKernelArg(m.sequential, kFirstOwn + 5, sizeof(int), &count), "clSetKernelArg");
+      // a work-item a block: a colour has few (a block is 1,024 grains), one group holds them
+      const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
+      check(clEnqueueNDRangeKernel(m.queue, m.sequential, 1, nullptr, &items, &local, 0, nullptr, nullptr),
+            "clEnqueueNDRangeKernel");
+    }
+    if (pins) m.project_pins(from, global);
+  }
+  m.download(*from, p, 3 * n * f);
+  m.download(m.seq, s.contacts, s.count * sizeof(gr_seq_contact));
 }
 
 }  // namespace grains::opencl

@@ -1,16 +1,20 @@
-// The substep's Jacobi iterations and friction passes on an OpenCL device (a grains node with
-// use_opencl). GrainsSolver::substep prepares the substep on the CPU as always (prediction,
-// neighbour rows, collider planes, contact history, pre-stabilization), hands the iterations'
-// inputs to run(), and finishes on the CPU (velocity, final collisions, history, strain). The
-// kernels are gr_iterate and gr_friction_pass, the functions the CPU loop calls
-// (opencl/grains.cl). Each grain writes only its own outputs and sums its contacts in row order,
-// so a device gives the same result run to run.
+// The substep's passes on an OpenCL device (a grains node with use_opencl): the Jacobi
+// iterations and friction passes (run()), or contact_solver gauss_seidel's passes
+// (run_sequential()). GrainsSolver::substep prepares the substep on the CPU as always
+// (prediction, neighbour rows, collider planes, contact history or the contacts and their warm
+// start, pre-stabilization), hands the passes' inputs to the device, and finishes on the CPU
+// (velocity, final collisions, history, strain). The kernels call the functions the CPU loops
+// call (gr_iterate, gr_friction_pass, gr_seq_pass; opencl/grains.cl). Each Jacobi work-item
+// writes only its own grain and sums its contacts in row order; each Gauss-Seidel work-item sweeps
+// one block of contacts in order, no two blocks at once writing one grain: a device gives the
+// same result run to run.
 #pragma once
 #include <cstddef>
 #include <memory>
 #include <string>
 
 #include "nodes/grains/kernels/iterate.h"
+#include "nodes/grains/kernels/sequential.h"
 
 namespace grains::opencl {
 
@@ -22,6 +26,23 @@ struct IterationSizes {
   size_t plane_entries = 0;
   size_t prims = 0;
   size_t row_length = 0;  // floats of one grain's overlap row (whole blocks of GR_LANES)
+};
+
+// contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks):
+// block b's contacts are contacts[block_start[b], block_start[b + 1]), colour c's blocks
+// colour_blocks[colour_start[c], colour_start[c + 1]); `others` (with others_prm) the explicit
+// constraints and clumping, one Jacobi group before each pass, null when there are none
+struct SequentialContacts {
+  gr_seq_contact* contacts = nullptr;  // in and out: each contact's loads
+  size_t count = 0;
+  const gr_uint* block_start = nullptr;
+  size_t blocks = 0;
+  const gr_uint* colour_blocks = nullptr;
+  const gr_uint* colour_start = nullptr;
+  size_t colours = 0;
+  float relax = 1.0f;  // over_relaxation
+  const gr_grains* others = nullptr;
+  const gr_params* others_prm = nullptr;
 };
 
 class Iterations {
@@ -39,6 +60,11 @@ class Iterations {
   // arrays, each null when unused) are read as they start and written back as they end.
   void run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
            const gr_normal_sums& acc, int iterations, bool friction_pass, bool accurate_friction);
+
+  // `iterations` passes of contact_solver gauss_seidel on p (3 n + 1 floats, in and out): each
+  // the others' Jacobi group, then the contacts colour by colour, then the pins (g.targetP)
+  void run_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
+                      const SequentialContacts& s, int iterations);
 
   const std::string& device_name() const;
 

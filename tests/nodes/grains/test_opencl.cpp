@@ -1,5 +1,5 @@
-// The OpenCL backend (a grains node's use_opencl; nodes/grains/opencl/iterations.h) on PoCL's
-// CPU device, which scripts/install-deps.sh installs on every machine that runs the tests: the
+// The OpenCL backend (a grains node's use_opencl; nodes/grains/opencl/iterations.h), with
+// either contact solver, on PoCL's CPU device, which scripts/install-deps.sh installs on every machine that runs the tests: the
 // same results as the CPU path within float rounding where the motion is smooth, the same
 // frames run to run, and a clear refusal where there is no device. Longer runs are checked by
 // their physical measures beside the CPU path's tests (stacks, sand_pile, the DEM collapse:
@@ -17,13 +17,11 @@ using namespace grains;
 
 namespace {
 
-// sand_pile's first `frames` frames with `sets` and use_opencl as given, with the Jacobi path
-// (the device's)
+// sand_pile's first `frames` frames with `sets` and use_opencl as given
 std::unique_ptr<Simulation> pour(bool opencl, int frames, std::vector<std::string> sets = {},
                                  int threads = 1) {
   register_builtin_nodes();
   sets.push_back(std::string("grains.use_opencl=") + (opencl ? "true" : "false"));
-  sets.push_back("grains.contact_solver=jacobi");
   std::vector<Override> overrides;
   for (const std::string& s : sets) overrides.push_back(parse_override(s));
   Graph g = load_graph(test::source_dir() + "/graphs/sand_pile.json", overrides);
@@ -50,6 +48,57 @@ int run_with(const char* var, const std::string& value, const std::string& args,
   return rc;
 }
 
+// a jittered 10 x 8 x 10 block of grains of radius r settled on the ground on the CPU (8 x 40,
+// 0.5 s), with `settings` for the substep to come, friction off: a switch between sticking and
+// sliding is a step, no bound on the backends' difference holds across it
+test::Scene settled_block(float r, const GrainsSettings& settings) {
+  test::Scene packed;
+  packed.add_collider(test::ground());
+  packed.add_jittered_block(10, 8, 10, r);
+  packed.s = test::settings(24, 8, 40);  // settled with shallow overlaps
+  packed.run(0.5f);
+  packed.s = settings;
+  packed.s.friction_with_particles = 0;
+  packed.s.friction_with_colliders = 0;
+  return packed;
+}
+
+// the premise of the bounds: how deep two grains can press into each other during the substep
+// (the deepest overlap now, plus two grains' approach in one substep at the fastest speed and
+// gravity's g dt^2), over the distance that leaves (`stretch`), and the coordinates' reach
+struct Premise {
+  double deepest = 0, fastest = 0, reach = 0, press = 0, stretch = 0;
+};
+Premise premise(const test::Scene& packed, float r) {
+  Premise m;
+  for (size_t i = 0; i < packed.size(); ++i) {
+    m.fastest = std::max(m.fastest, double(length(packed.vel(i))));
+    for (int a = 0; a < 3; ++a) m.reach = std::max(m.reach, std::fabs(double(packed.P[3 * i + a])));
+    for (size_t j = i + 1; j < packed.size(); ++j)
+      m.deepest = std::max(m.deepest, 2.0 * r - length(packed.pos(i) - packed.pos(j)));
+  }
+  const double dt = packed.s.dt;
+  m.press = m.deepest + 2 * m.fastest * dt + test::kG * dt * dt;
+  m.stretch = m.press / (2 * r - m.press);
+  return m;
+}
+
+// one substep of `packed` on each backend: the largest distance between a grain's two
+// positions, and the CPU's pairs closer than `touch`
+std::pair<double, size_t> one_substep_apart(const test::Scene& packed, float touch) {
+  test::Scene cpu = packed, dev = packed;
+  dev.s.use_opencl = true;
+  cpu.substep();
+  dev.substep();
+  double worst = 0;
+  size_t touching = 0;
+  for (size_t i = 0; i < cpu.size(); ++i) {
+    worst = std::max(worst, static_cast<double>(length(cpu.pos(i) - dev.pos(i))));
+    for (size_t j = i + 1; j < cpu.size(); ++j) touching += length(cpu.pos(i) - cpu.pos(j)) < touch;
+  }
+  return {worst, touching};
+}
+
 }  // namespace
 
 TEST_CASE("use_opencl: a substep agrees with the CPU path's within float rounding", "[opencl]") {
@@ -68,74 +117,90 @@ TEST_CASE("use_opencl: a substep agrees with the CPU path's within float roundin
   // grains), and with friction a contact's switch between sticking and sliding is a step; the
   // physical measures are compared instead (the other "use_opencl:" tests).
   const float r = 0.05f;
-  test::Scene packed;
-  packed.add_collider(test::ground());
-  packed.add_jittered_block(10, 8, 10, r);
-  packed.s = test::settings(24, 8, 40);  // settled with shallow overlaps
-  packed.run(0.5f);
-  packed.s = test::settings(24, 2, 20);
-  packed.s.contact_solver = kContactJacobi;  // the device's path
-  packed.s.friction_with_particles = 0;
-  packed.s.friction_with_colliders = 0;
-  // the premise of the bound: how deep two grains can press into each other during the
-  // substep (the deepest overlap now, plus two grains' approach in one substep at the fastest
-  // speed and gravity's g dt^2), over the distance that leaves, and the coordinates' reach
-  double deepest = 0, fastest = 0, reach = 0;
-  for (size_t i = 0; i < packed.size(); ++i) {
-    fastest = std::max(fastest, double(length(packed.vel(i))));
-    for (int a = 0; a < 3; ++a) reach = std::max(reach, std::fabs(double(packed.P[3 * i + a])));
-    for (size_t j = i + 1; j < packed.size(); ++j)
-      deepest = std::max(deepest, 2.0 * r - length(packed.pos(i) - packed.pos(j)));
-  }
-  const double dt = packed.s.dt;
-  const double press = deepest + 2 * fastest * dt + test::kG * dt * dt;
-  const double stretch = press / (2 * r - press);
+  GrainsSettings settings = test::settings(24, 2, 20);
+  settings.contact_solver = kContactJacobi;
+  test::Scene packed = settled_block(r, settings);
+  const Premise m = premise(packed, r);
   const int I = packed.s.constraint_iterations;
-  const double bound = I * 4 * std::ldexp(reach, -24) * std::pow(1 + stretch, I);
-  INFO("deepest overlap " << deepest << " m, fastest " << fastest << " m/s: overlap / distance at most "
-                          << stretch << "; coordinates within " << reach << " m: bound " << bound << " m");
+  const double bound = I * 4 * std::ldexp(m.reach, -24) * std::pow(1 + m.stretch, I);
+  INFO("deepest overlap " << m.deepest << " m, fastest " << m.fastest << " m/s: overlap / distance at most "
+                          << m.stretch << "; coordinates within " << m.reach << " m: bound " << bound << " m");
   for (bool rebuild : {false, true}) {
     INFO((rebuild ? "rows rebuilt every iteration" : "rows once a substep"));
-    test::Scene cpu = packed, dev = packed;
-    cpu.s.update_neighbors_during_iterations = dev.s.update_neighbors_during_iterations = rebuild;
-    dev.s.use_opencl = true;
-    cpu.substep();
-    dev.substep();
-    double worst = 0;
-    size_t touching = 0;
-    for (size_t i = 0; i < cpu.size(); ++i) {
-      worst = std::max(worst, static_cast<double>(length(cpu.pos(i) - dev.pos(i))));
-      for (size_t j = i + 1; j < cpu.size(); ++j) touching += length(cpu.pos(i) - cpu.pos(j)) < 2 * r;
-    }
+    packed.s.update_neighbors_during_iterations = rebuild;
+    const auto [worst, touching] = one_substep_apart(packed, 2 * r);
     INFO("largest difference " << worst << " m; " << touching << " touching pairs");
     CHECK(touching > 800);  // a packing, not a gas
     CHECK(worst <= bound);
   }
 }
 
+TEST_CASE("use_opencl: a gauss_seidel substep agrees with the CPU path's within float rounding",
+          "[opencl][gauss_seidel]") {
+  // The same settled block, one more substep of the contacts one at a time (8 x 10 at 24 fps,
+  // the node's 10 passes; friction off: a switch between sticking and sliding is a step, no
+  // bound holds across it).
+  // The host builds the contacts, pre-stabilizes and warm-starts them alike; the device runs the
+  // passes, in the CPU's order (blocks in colours), with the same functions, which it may
+  // compile with another fusing of multiplies and adds: a few units in the last place of a
+  // coordinate a move, 4 x 2^-24 x the coordinates' reach. A pass moves a grain once for each
+  // of its z contacts, each move projecting the pair's distance onto r_i + r_j, which stretches
+  // a difference between two nearby states by at most (r_i + r_j) / |x_ij| = 1 + overlap /
+  // distance; over I passes the two differ by at most z I x 4 ulp x (1 + stretch)^(z I), z the
+  // most grains any grain can touch in the substep (counted) and the overlap the deepest the
+  // substep can reach (as in the Jacobi test above; with the exponent z I, a substep of 2 x 20,
+  // whose fall g dt^2 is 8.5% of a radius, would bound nothing).
+  const float r = 0.05f;
+  test::Scene packed = settled_block(r, test::settings(24, 8, 10));
+  REQUIRE(packed.s.contact_solver == kContactGaussSeidel);
+  const Premise m = premise(packed, r);
+  int z = 1;  // the ground's plane counts as one more contact
+  for (size_t i = 0; i < packed.size(); ++i) {
+    int near = 1;
+    for (size_t j = 0; j < packed.size(); ++j)
+      near += j != i && length(packed.pos(i) - packed.pos(j)) < 2 * r + 2 * m.fastest * packed.s.dt + m.press;
+    z = std::max(z, near);
+  }
+  const int I = packed.s.constraint_iterations;
+  const double bound = z * I * 4 * std::ldexp(m.reach, -24) * std::pow(1 + m.stretch, z * I);
+  INFO("deepest overlap " << m.deepest << " m, fastest " << m.fastest << " m/s: overlap / distance at most "
+                          << m.stretch << "; at most " << z << " contacts a grain; bound " << bound << " m");
+  // touching: within a thousandth of a diameter (rigid contacts end at 2 r, not inside it)
+  const auto [worst, touching] = one_substep_apart(packed, 2.002f * r);
+  INFO("largest difference " << worst << " m; " << touching << " touching pairs");
+  CHECK(touching > 800);  // a packing, not a gas
+  CHECK(worst <= bound);
+}
+
 TEST_CASE("use_opencl: the same graph gives the same frames run to run", "[opencl]") {
-  // each work-item writes only its own grain's outputs and sums its contacts in row order:
-  // the device's result does not depend on how it schedules them, and the host's part of the
-  // substep is the CPU path's, the same for any thread count. sand_pile with friction,
-  // 6 frames, with one host thread and with two: the same bits.
-  auto one = pour(true, 6, {}, 1), two = pour(true, 6, {}, 2);
-  CHECK(array(*one, "P") == array(*two, "P"));
-  CHECK(array(*one, "v") == array(*two, "v"));
+  // A Jacobi work-item writes only its own grain's outputs and sums its contacts in row order;
+  // a Gauss-Seidel work-item sweeps one block of contacts in order, and no two blocks swept at
+  // once write one grain: the device's result does not depend on how it schedules them, and
+  // the host's part of the substep is the CPU path's, the same for any thread count. sand_pile
+  // with friction, 6 frames, with one host thread and with two: the same bits, on both solvers.
+  for (const char* solver : {"gauss_seidel", "jacobi"}) {
+    INFO(solver);
+    const std::string set = std::string("grains.contact_solver=") + solver;
+    auto one = pour(true, 6, {set}, 1), two = pour(true, 6, {set}, 2);
+    CHECK(array(*one, "P") == array(*two, "P"));
+    CHECK(array(*one, "v") == array(*two, "v"));
+  }
 }
 
 TEST_CASE("grains run --opencl runs every grains node on the device", "[cli][opencl]") {
-  // --opencl is use_opencl and contact_solver jacobi on every grains node: its frames are byte
-  // for byte those of the two `--set`s (the device is deterministic run to run, see above; the CPU
-  // path's frame_0002 differs from them from byte 314, so a flag that did nothing would fail)
+  // --opencl is use_opencl on every grains node: its frames are byte for byte those of the
+  // `--set` (the device is deterministic run to run, see above; the CPU path's frame_0002
+  // differs from them, checked below, so a flag that did nothing would fail)
   const std::string dir = test::temp_dir("run_opencl");
   const std::string graph = test::source_dir() + "/graphs/sand_pile.json";
   const std::string run = "run " + graph + " --frames 2 --quiet --out " + dir;
   REQUIRE(test::run_grains(run + "/flag --opencl", dir + "/log.txt") == 0);
-  REQUIRE(test::run_grains(run + "/set --set grains.use_opencl=true --set grains.contact_solver=jacobi",
-                           dir + "/log.txt") == 0);
+  REQUIRE(test::run_grains(run + "/set --set grains.use_opencl=true", dir + "/log.txt") == 0);
+  REQUIRE(test::run_grains(run + "/cpu", dir + "/log.txt") == 0);
   const std::string flag = test::read_text(dir + "/flag/frame_0002.ply");
   CHECK(flag.size() > 99 * 3 * sizeof(float));
   CHECK(flag == test::read_text(dir + "/set/frame_0002.ply"));
+  CHECK(flag != test::read_text(dir + "/cpu/frame_0002.ply"));
 }
 
 TEST_CASE("use_opencl without an OpenCL platform, or with a device that is not there, exits 2",

@@ -169,7 +169,7 @@ TEST_CASE("sleeping: a grain dropped on sleepers wakes those it hits and rests o
   // the pocket, at r + d / sqrt(2) over the ground (the pocket of a square layer of pitch d),
   // and all sleep again. Sleeping is the node's, around the solver: the same with the Jacobi
   // path and on the OpenCL device.
-  for (const json& variant : {json::object(), json{{"contact_solver", "jacobi"}},
+  for (const json& variant : {json::object(), json{{"contact_solver", "jacobi"}}, json{{"use_opencl", true}},
                               json{{"use_opencl", true}, {"contact_solver", "jacobi"}}}) {
     INFO(variant.dump());
     auto layer = sleeping_layer(json::array({kGround}), variant);

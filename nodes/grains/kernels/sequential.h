@@ -1,0 +1,119 @@
+/* contact_solver gauss_seidel's contacts and its pass over one of them: the CPU sweeps
+ * (nodes/grains/gauss_seidel.cpp, which says why and how) and the OpenCL device's
+ * (opencl/grains.cl, gr_k_sequential) call the same gr_seq_pass.
+ *
+ * A contact c between grains i and j (j a plane for colliders) keeps two accumulators over the
+ * substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
+ * lt, the tangential one. A pass over c:
+ *   normal:   C = |x_ij| - (r_i + r_j) (planes: (x_i - x_s) . n - r_i);
+ *             ln' = max(0, ln - w k C) (it can take back what it pushed, never pull; w is
+ *             over_relaxation);
+ *             i moves a_i (ln' - ln) n, j moves -a_j (ln' - ln) n, a_i = `share`;
+ *   friction: u = the pair's relative displacement over the substep (planes: relative to the
+ *             collider's motion), its tangential part u_t; lt' = lt - u_t; unless |lt'| is under
+ *             mu_s ln' (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x
+ *             friction; gr_friction, contact.h); i moves a_i (lt' - lt), j the opposite a_j share.
+ * A contact without load holds no friction: what it rubbed in the substep is given back. */
+#ifndef GRAINS_KERNELS_SEQUENTIAL_H
+#define GRAINS_KERNELS_SEQUENTIAL_H
+#include "collider.h"
+#include "contact.h"
+
+#ifdef GR_OPENCL
+typedef ulong gr_ulong;
+#else
+typedef unsigned long long gr_ulong;
+#endif
+
+/* One contact; the host builds them each substep and the device reads the same bytes (56 a
+ * contact on both sides: 8-byte key aligned at 16). */
+typedef struct {
+  int i, j;       /* j < 0: collider plane entry e */
+  gr_uint e;
+  gr_uint moves;  /* bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written */
+  gr_ulong key;   /* who the contact is across substeps (the grains' ids; a plane: its collider) */
+  float k;        /* correction scale (repulsion weight x stiffness fraction; planes 1) */
+  float share;    /* i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest */
+  float mu;       /* friction scale (friction_with_particles or _colliders x the attribute) */
+  float ln;       /* normal correction applied in the substep (m of relative motion) */
+  float lt[3];    /* tangential correction applied in the substep (m), i's side */
+} gr_seq_contact;
+
+/* a[i] += d s */
+GR_INLINE void gr_seq_move(GR_GLOBAL float* a, int i, gr_float3 d, float s) {
+  gr_store3(a, i, gr_madd(gr_load3(a, i), d, s));
+}
+
+/* d applied to the contact's grains by their shares; a fixed grain's share is 0 (its partner's
+ * 1): it is read, never written, so that blocks swept at once may share it */
+GR_INLINE void gr_seq_apply(GR_GLOBAL float* p, const GR_GLOBAL gr_seq_contact* q, gr_float3 d) {
+  if (q->moves & 1u) gr_seq_move(p, q->i, d, q->share);
+  if (q->moves & 2u) gr_seq_move(p, q->j, d, -(1.0f - q->share));
+}
+
+/* the contact's normal from i's side into *nrm, and its gap C (< 0: overlap), at positions x */
+GR_INLINE float gr_seq_geometry(const gr_grains* g, const GR_GLOBAL float* x,
+                                const GR_GLOBAL gr_seq_contact* q, gr_float3* nrm) {
+  gr_float3 d;
+  float dist;
+  if (q->j < 0) {
+    *nrm = gr_plane_normal(g, q->e);
+    return -gr_plane_penetration(g, q->i, q->e, gr_load3(x, q->i));
+  }
+  d = gr_sub(gr_load3(x, q->i), gr_load3(x, q->j));
+  dist = gr_length(d);
+  *nrm = gr_pair_normal(d, dist, q->i, q->j);
+  return dist - g->radius[q->i] - g->radius[q->j];
+}
+
+/* a grain pair apart at positions x, found without a square root: most of the search's
+ * candidates (in a settled packing two of three) never touch in the substep */
+GR_INLINE int gr_seq_apart(const gr_grains* g, const GR_GLOBAL float* x, const GR_GLOBAL gr_seq_contact* q) {
+  gr_float3 d;
+  float reach;
+  if (q->j < 0) return 0;
+  d = gr_sub(gr_load3(x, q->i), gr_load3(x, q->j));
+  reach = g->radius[q->i] + g->radius[q->j];
+  return gr_dot(d, d) >= reach * reach;
+}
+
+/* one pass over contact q at positions p (in place), g->P the substep's start; `relax` is
+ * over_relaxation */
+GR_INLINE void gr_seq_pass(const gr_grains* g, const gr_params* prm, GR_GLOBAL float* p,
+                           GR_GLOBAL gr_seq_contact* q, float relax) {
+  gr_float3 nrm, dn, u, lt0, lt;
+  float C, ln;
+  if (!(q->ln > 0.0f) && gr_seq_apart(g, p, q)) return;
+  C = gr_seq_geometry(g, p, q, &nrm);
+  if (C >= 0.0f && !(q->ln > 0.0f)) return;
+  ln = gr_max(0.0f, q->ln - relax * q->k * C);
+  dn = gr_scale(nrm, ln - q->ln);
+  q->ln = ln;
+  gr_seq_apply(p, q, dn);
+  if (!(ln > 0.0f) || !(q->mu > 0.0f)) {
+    /* the cone of a zero normal load is a point: what the contact rubbed is given back */
+    if (q->lt[0] != 0.0f || q->lt[1] != 0.0f || q->lt[2] != 0.0f) {
+      const gr_float3 back = gr_make3(-q->lt[0], -q->lt[1], -q->lt[2]);
+      q->lt[0] = q->lt[1] = q->lt[2] = 0.0f;
+      gr_seq_apply(p, q, back);
+    }
+    return;
+  }
+  u = gr_sub(gr_load3(p, q->i), gr_load3(g->P, q->i));
+  if (q->j >= 0) {
+    u = gr_sub(u, gr_sub(gr_load3(p, q->j), gr_load3(g->P, q->j)));
+  } else {
+    const GR_GLOBAL float* pl = g->plane + 9 * q->e;
+    u = gr_sub(u, gr_scale(gr_make3(pl[6], pl[7], pl[8]), prm->dt));
+  }
+  lt0 = gr_make3(q->lt[0], q->lt[1], q->lt[2]);
+  /* the substep's tangential correction so far must cancel its slip, within the contact's cone
+   * (static below static_threshold x mu ln, else cut to scale_kinetic x it) */
+  lt = gr_friction(gr_sub(u, lt0), nrm, q->mu * ln, prm->static_threshold, prm->scale_kinetic);
+  q->lt[0] = lt.x;
+  q->lt[1] = lt.y;
+  q->lt[2] = lt.z;
+  gr_seq_apply(p, q, gr_sub(lt, lt0));
+}
+
+#endif /* GRAINS_KERNELS_SEQUENTIAL_H */

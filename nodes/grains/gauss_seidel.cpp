@@ -86,6 +86,20 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // the contacts: each grain pair once (from the lower index's row), then each grain's planes
   seq_.clear();
   const bool pairs = g.nbr_offsets && prm.internal_collisions_weight > 0;
+  // room for every candidate before the list is built: growing it by doubling while it is built
+  // holds the old list and the new at once (56 bytes a contact, about nine a grain in a settled
+  // box: 0.5 GB a million grains)
+  {
+    size_t most = 0;
+    if (pairs)
+      for (int i = 0; i < ni; ++i)
+        for (gr_uint e = g.nbr_offsets[i]; e < g.nbr_offsets[i + 1]; ++e) most += int(g.nbr_indices[e]) > i;
+    if (g.plane_offsets) most += g.plane_offsets[n];
+    if (seq_.capacity() < most) {
+      seq_ = std::vector<SeqContact>();  // freed before the larger list is taken
+      seq_.reserve(most + most / 16);
+    }
+  }
   const bool skip_constrained =
       g.con_offsets && !prm.collide_mutually_constrained_particles && !g.nbr_unconstrained;
   for (int i = 0; i < ni; ++i) {
@@ -214,27 +228,26 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     const float scale = (dt / seq_dt_) * (dt / seq_dt_);
     const size_t m = seq_.size();
     const gr_float3 zero = gr_make3(0.0f, 0.0f, 0.0f);
-    std::vector<float>& load = warm_load_;
+    // each contact's repeated load waits in its own accumulators (q.ln, q.lt), which the
+    // passes start from, until the last sweep below scales it by the contact's factor
     std::vector<float>& factor = warm_factor_;
-    std::vector<gr_float3>& tang = warm_tang_;
     std::vector<gr_float3>& normal = warm_normal_;
-    load.assign(m, 0.0f);
     factor.assign(m, 0.0f);
-    tang.assign(m, zero);
     normal.assign(m, zero);
     const long lm = static_cast<long>(m);
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
     for (long k = 0; k < lm; ++k) {
-      const SeqContact& q = seq_[k];
+      SeqContact& q = seq_[k];
       const SeqLoad* it = find_load(q.key);
       if (!it) continue;
       gr_float3& nrm = normal[k];
       geometry(q, &nrm);
       // stored on the grain of the lower id
       const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
-      load[k] = it->ln * scale;
-      tang[k] = tangential(gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale), nrm);
-      factor[k] = load[k] > 0.0f ? 1.0f : 0.0f;
+      q.ln = it->ln * scale;
+      const gr_float3 t = tangential(gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale), nrm);
+      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
+      factor[k] = q.ln > 0.0f ? 1.0f : 0.0f;
     }
     // what the loads, each scaled by its factor, give every moving grain (D), summed in the
     // sweep's order (the same for any thread count)
@@ -244,7 +257,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       sweep([&](const SeqContact& q) -> float {
         const size_t k = static_cast<size_t>(&q - seq_.data());
         if (!(factor[k] > 0.0f)) return 0.0f;
-        const gr_float3 d = gr_scale(gr_add(gr_scale(normal[k], load[k]), tang[k]), factor[k]);
+        const gr_float3 d =
+            gr_scale(gr_add(gr_scale(normal[k], q.ln), gr_make3(q.lt[0], q.lt[1], q.lt[2])), factor[k]);
         if (q.moves & 1u) repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
         if (q.moves & 2u) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
         return 0.0f;
@@ -299,9 +313,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     sweep([&](SeqContact& q) -> float {
       const size_t k = static_cast<size_t>(&q - seq_.data());
       const float f = factor[k];
-      if (!(f > 0.0f)) return 0.0f;
-      q.ln = load[k] * f;
-      const gr_float3 t = gr_scale(tang[k], f);
+      if (!(f > 0.0f)) {
+        q.ln = 0.0f, q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;  // a cold start
+        return 0.0f;
+      }
+      q.ln *= f;
+      const gr_float3 t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), f);
       q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
       const gr_float3 d = gr_add(gr_scale(normal[k], q.ln), t);
       apply(q, d);
@@ -389,6 +406,14 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
 
   // the loads the next substep starts from
   seq_loads_.clear();
+  {
+    size_t loaded = 0;
+    for (const SeqContact& q : seq_) loaded += q.ln > 0.0f;
+    if (seq_loads_.capacity() < loaded) {
+      seq_loads_ = std::vector<SeqLoad>();  // as seq_: no old and new list at once
+      seq_loads_.reserve(loaded + loaded / 16);
+    }
+  }
   for (const SeqContact& q : seq_) {
     if (!(q.ln > 0.0f)) continue;
     const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;

@@ -263,8 +263,8 @@ class GrainsSolver {
   void index_loads();
   const SeqLoad* find_load(uint64_t key) const;
   // the warm start's per-contact and per-grain working arrays, kept between substeps
-  std::vector<float> warm_load_, warm_factor_, warm_balance_;
-  std::vector<gr_float3> warm_tang_, warm_normal_, warm_repeat_, warm_external_;
+  std::vector<float> warm_factor_, warm_balance_;
+  std::vector<gr_float3> warm_normal_, warm_repeat_, warm_external_;
   std::vector<uint8_t> warm_cold_;
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   // the history saved at the end of the last substep, by grain in that substep's order: the id

@@ -451,9 +451,10 @@ int cmd_devices(std::string choice_text) {
     for (size_t d = 0; d < pl.devices.size(); ++d) {
       if (!choice_text.empty() && d != choice.device) continue;
       const opencl::Device& dv = pl.devices[d];
-      std::printf("  device %zu: %s (%s, %u compute units, %.0f MiB, %s, %s)\n", d,
-                  dv.name.c_str(), dv.type.c_str(), dv.compute_units,
-                  static_cast<double>(dv.global_memory) / (1024.0 * 1024.0), dv.version.c_str(),
+      std::printf("  device %zu: %s (%s, %u compute units, %.0f MiB, largest buffer %.0f MiB, %s, %s)\n",
+                  d, dv.name.c_str(), dv.type.c_str(), dv.compute_units,
+                  static_cast<double>(dv.global_memory) / (1024.0 * 1024.0),
+                  static_cast<double>(dv.largest_buffer) / (1024.0 * 1024.0), dv.version.c_str(),
                   dv.c_version.c_str());
       const opencl::BuildResult b = opencl::build_kernels(p, d);
       if (b.ok) {

@@ -20,6 +20,9 @@ TEST_CASE("grains devices lists PoCL's CPU device, which builds the grains kerne
   CHECK_THAT(out, Catch::Contains("platform 0: Portable Computing Language"));
   CHECK_THAT(out, Catch::Contains("device 0: "));
   CHECK_THAT(out, Catch::Contains("(cpu, "));
+  // the most one buffer may hold (docs/opencl.md, "Memory"): PoCL gives a positive figure
+  CHECK_THAT(out, Catch::Contains(" MiB, largest buffer "));
+  CHECK_THAT(out, !Catch::Contains("largest buffer 0 MiB"));
   CHECK_THAT(out, Catch::Contains("grains kernels: built in"));
   CHECK_THAT(out, !Catch::Contains("build failed"));
 }

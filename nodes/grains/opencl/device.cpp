@@ -97,6 +97,9 @@ std::vector<Platform> platforms(std::string* problem) {
       cl_ulong memory = 0;
       clGetDeviceInfo(d, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof memory, &memory, nullptr);
       dv.global_memory = memory;
+      cl_ulong largest = 0;
+      clGetDeviceInfo(d, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof largest, &largest, nullptr);
+      dv.largest_buffer = largest;
       pl.devices.push_back(dv);
     }
     out.push_back(std::move(pl));
@@ -134,8 +137,24 @@ std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice
          " (" + there + ")";
 }
 
+bool buffer_cap(uint64_t* bytes, std::string* problem) {
+  *bytes = 0;
+  const char* cap = std::getenv("GRAINS_OPENCL_MAX_BUFFER_MIB");
+  if (!cap || !*cap) return true;
+  char* end = nullptr;
+  const long long v = std::strtoll(cap, &end, 10);
+  if (*end != '\0' || v < 1 || v > (1ll << 30)) {
+    *problem = std::string("GRAINS_OPENCL_MAX_BUFFER_MIB: '") + cap + "' is not a whole number of MiB from 1 to 2^30";
+    return false;
+  }
+  *bytes = static_cast<uint64_t>(v) << 20;
+  return true;
+}
+
 bool chosen_device(DeviceChoice* out, std::string* problem) {
   *out = DeviceChoice{};
+  uint64_t cap = 0;
+  if (!buffer_cap(&cap, problem)) return false;
   const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
   const std::string text = env ? env : "";
   if (!text.empty() && !parse_device_choice(text, out, problem)) {

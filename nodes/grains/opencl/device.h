@@ -15,6 +15,7 @@ struct Device {
   std::string c_version;  // CL_DEVICE_OPENCL_C_VERSION
   uint32_t compute_units = 0;
   uint64_t global_memory = 0;  // bytes
+  uint64_t largest_buffer = 0;  // bytes: CL_DEVICE_MAX_MEM_ALLOC_SIZE, the most one buffer holds
 };
 
 struct Platform {
@@ -39,6 +40,12 @@ std::string choice_problem(const std::vector<Platform>& list, const DeviceChoice
 // the first platform's first device. Returns false with *problem set when there is no platform,
 // the variable is malformed or names no device.
 bool chosen_device(DeviceChoice* out, std::string* problem);
+
+// GRAINS_OPENCL_MAX_BUFFER_MIB: the most MiB one device buffer may take, below the device's own
+// CL_DEVICE_MAX_MEM_ALLOC_SIZE (a driver that reports more than it can give; tests of the parts
+// the contacts are split into). Unset: *bytes = 0 (no cap). Malformed: false, *problem says why.
+// chosen_device() checks it too.
+bool buffer_cap(uint64_t* bytes, std::string* problem);
 
 struct BuildResult {
   bool ok = false;

@@ -121,10 +121,11 @@ __kernel void gr_k_pin(gr_params prm, __global const float* targetP,
 /* contact_solver gauss_seidel's pass over one colour of blocks (gauss_seidel.cpp): work-item t
  * sweeps block blocks[first + t]'s contacts in their order, in place (gr_seq_pass, the CPU's
  * pass); no two blocks of a colour write one grain, so the result is the CPU's order's whatever
- * the device's schedule */
+ * the device's schedule. seq holds the contacts from number base on (the host's parts) */
 __kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
                               __global gr_seq_contact* seq, __global const gr_uint* block_start,
-                              __global const gr_uint* blocks, int first, int count, float relax) {
+                              __global const gr_uint* blocks, int first, int count, float relax,
+                              gr_uint base) {
   const int t = (int)get_global_id(0);
   gr_uint b, k, e;
   if (t >= count) return;
@@ -132,6 +133,6 @@ __kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
     b = blocks[first + t];
     e = block_start[b + 1];
-    for (k = block_start[b]; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + k, relax);
+    for (k = block_start[b]; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
   }
 }

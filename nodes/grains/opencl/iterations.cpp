@@ -1,6 +1,9 @@
 #include "nodes/grains/opencl/iterations.h"
 
+#include <algorithm>
+#include <cstdio>
 #include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -18,13 +21,27 @@ void check(cl_int status, const char* what) {
     throw std::runtime_error(std::string("OpenCL: ") + what + " failed (" + std::to_string(status) + ")");
 }
 
+std::string mib(size_t bytes) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.1f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  return text;
+}
+
 // A device buffer grown on demand (never shrunk: the grains' counts vary from substep to substep).
 struct Buffer {
   cl_mem mem = nullptr;
   size_t capacity = 0;
-  void reserve(cl_context ctx, size_t bytes) {
+  // `largest`: the most bytes one buffer of the device may hold (Impl::largest)
+  void reserve(cl_context ctx, size_t bytes, size_t largest) {
     bytes = std::max<size_t>(bytes, 4);
     if (bytes <= capacity) return;
+    // a driver need not refuse a larger one: PoCL 3.1 took 4.9 GB with a 4 GiB limit and its
+    // copy into it crashed
+    if (bytes > largest)
+      throw std::runtime_error("use_opencl: the substep needs a device buffer of " + mib(bytes) +
+                               ", more than the device's largest, " + mib(largest) +
+                               " (CL_DEVICE_MAX_MEM_ALLOC_SIZE or GRAINS_OPENCL_MAX_BUFFER_MIB): "
+                               "too many grains for this device; run them on the CPU (use_opencl off)");
     release();
     cl_int status = CL_SUCCESS;
     mem = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, nullptr, &status);
@@ -97,13 +114,21 @@ struct Iterations::Impl {
   Buffer arrays[kArrays];
   Buffer p, next, scratch, pair_sum, collider_sum, collider_dx, friction_dx;
   Buffer target, target_weight, target_stiffness;  // pins
-  Buffer seq, block_start, colour_blocks;         // gauss_seidel's contacts
+  // gauss_seidel's contacts in parts of whole blocks, each within the largest buffer: part k
+  // holds blocks [part_block[k], part_block[k + 1])
+  std::vector<Buffer> seq;
+  std::vector<size_t> part_block;
+  Buffer block_start, colour_blocks;
+  // the most bytes one buffer may hold: the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE, or less
+  // when GRAINS_OPENCL_MAX_BUFFER_MIB says so
+  size_t largest = 0;
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
-                      &target, &target_weight, &target_stiffness, &seq, &block_start, &colour_blocks})
+                      &target, &target_weight, &target_stiffness, &block_start, &colour_blocks})
       b->release();
+    for (Buffer& b : seq) b.release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
@@ -114,7 +139,7 @@ struct Iterations::Impl {
   // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
   void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
     if (!host) return;
-    b.reserve(ctx, std::max(bytes, device_bytes));
+    b.reserve(ctx, std::max(bytes, device_bytes), largest);
     if (bytes > 0) check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
                          "clEnqueueWriteBuffer");
   }
@@ -133,7 +158,7 @@ struct Iterations::Impl {
       upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
     const size_t bytes = (3 * size.n + 1) * sizeof(float);
     upload(p, positions, bytes);
-    next.reserve(ctx, bytes);
+    next.reserve(ctx, bytes, largest);
   }
   // kernel k's first arguments: prm, the arrays `a` holds (null where it has none) and g's scalars
   void set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a);
@@ -163,6 +188,13 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
     impl_->name = list[choice.platform].devices[choice.device].name + " (platform " +
                   std::to_string(choice.platform) + ", " + list[choice.platform].name + ")";
   }
+  cl_ulong largest = 0;
+  check(clGetDeviceInfo(d, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof largest, &largest, nullptr),
+        "clGetDeviceInfo(CL_DEVICE_MAX_MEM_ALLOC_SIZE)");
+  impl_->largest = static_cast<size_t>(largest);
+  uint64_t cap = 0;
+  if (!buffer_cap(&cap, &problem)) throw std::runtime_error("use_opencl: " + problem);
+  if (cap > 0) impl_->largest = std::min(impl_->largest, static_cast<size_t>(cap));
   cl_int status = CL_SUCCESS;
   impl_->ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
   check(status, "clCreateContext");
@@ -228,7 +260,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   HostArray inputs[kArrays];
   m.upload_grains(g, size, p, inputs);
   const bool pairs = acc.pair && g.nbr_offsets;
-  if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f);
+  if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f, m.largest);
   m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
   m.upload(m.collider_sum, acc.collider, size.plane_entries * f);
   m.upload(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
@@ -290,7 +322,20 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   HostArray inputs[kArrays];
   m.upload_grains(g, size, p, inputs);
-  m.upload(m.seq, s.contacts, s.count * sizeof(gr_seq_contact));
+  // the contacts in parts of whole blocks (Impl::seq): a million grains' take about 0.5 GB, more
+  // than some devices' largest buffer (PoCL: 4 GiB) at ten million
+  const size_t per = sizeof(gr_seq_contact);
+  m.part_block.assign(1, 0);
+  for (size_t b = 0; b < s.blocks; ++b)
+    if (b > m.part_block.back() && (s.block_start[b + 1] - s.block_start[m.part_block.back()]) * per > m.largest)
+      m.part_block.push_back(b);
+  m.part_block.push_back(s.blocks);
+  const size_t parts = m.part_block.size() - 1;
+  for (size_t k = parts; k < m.seq.size(); ++k) m.seq[k].release();
+  m.seq.resize(parts);
+  auto part_first = [&](size_t k) { return s.block_start[m.part_block[k]]; };
+  auto part_count = [&](size_t k) { return s.block_start[m.part_block[k + 1]] - part_first(k); };
+  for (size_t k = 0; k < parts; ++k) m.upload(m.seq[k], s.contacts + part_first(k), part_count(k) * per);
   m.upload(m.block_start, s.block_start, (s.blocks + 1) * u);
   m.upload(m.colour_blocks, s.colour_blocks, s.blocks * u);
 
@@ -309,9 +354,9 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
       else set_buffer(m.others, a, nullptr);
     check(clSetKernelArg(m.others, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
   }
-  // the contacts: p, seq, block_start, blocks, first, count, relax (first and count by colour)
+  // the contacts: p, seq, block_start, blocks, first, count, relax, base (seq, first, count and
+  // base by colour and part)
   m.set_grains(m.sequential, prm, g, inputs);
-  set_buffer(m.sequential, kFirstOwn + 1, &m.seq);
   set_buffer(m.sequential, kFirstOwn + 2, &m.block_start);
   set_buffer(m.sequential, kFirstOwn + 3, &m.colour_blocks);
   check(clSetKernelArg(m.sequential, kFirstOwn + 6, sizeof(float), &s.relax), "clSetKernelArg");
@@ -326,20 +371,31 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
       std::swap(from, to);
     }
     set_buffer(m.sequential, kFirstOwn, from);
-    for (size_t c = 0; c < s.colours && s.count > 0; ++c) {
-      const int first = static_cast<int>(s.colour_start[c]);
-      const int count = static_cast<int>(s.colour_start[c + 1] - s.colour_start[c]);
-      check(clSetKernelArg(m.sequential, kFirstOwn + 4, sizeof(int), &first), "clSetKernelArg");
-      check(clSetKernelArg(m.sequential, kFirstOwn + 5, sizeof(int), &count), "clSetKernelArg");
-      // a work-item a block (a block is 1,024 grains: a colour has few), in whole groups
-      const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
-      check(clEnqueueNDRangeKernel(m.queue, m.sequential, 1, nullptr, &items, &local, 0, nullptr, nullptr),
-            "clEnqueueNDRangeKernel");
-    }
+    for (size_t c = 0; c < s.colours && s.count > 0; ++c)
+      for (size_t k = 0; k < parts; ++k) {
+        // the colour's blocks (ascending) that lie in part k; blocks of one colour touch no
+        // common grain, so sweeping them part by part gives what one launch would
+        const gr_uint* from_block = s.colour_blocks + s.colour_start[c];
+        const gr_uint* to_block = s.colour_blocks + s.colour_start[c + 1];
+        const gr_uint* lo = std::lower_bound(from_block, to_block, static_cast<gr_uint>(m.part_block[k]));
+        const gr_uint* hi = std::lower_bound(lo, to_block, static_cast<gr_uint>(m.part_block[k + 1]));
+        if (lo == hi) continue;
+        const int first = static_cast<int>(lo - s.colour_blocks);
+        const int count = static_cast<int>(hi - lo);
+        const gr_uint base = part_first(k);
+        set_buffer(m.sequential, kFirstOwn + 1, &m.seq[k]);
+        check(clSetKernelArg(m.sequential, kFirstOwn + 4, sizeof(int), &first), "clSetKernelArg");
+        check(clSetKernelArg(m.sequential, kFirstOwn + 5, sizeof(int), &count), "clSetKernelArg");
+        check(clSetKernelArg(m.sequential, kFirstOwn + 7, sizeof(gr_uint), &base), "clSetKernelArg");
+        // a work-item a block (a block is 1,024 grains: a colour has few), in whole groups
+        const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
+        check(clEnqueueNDRangeKernel(m.queue, m.sequential, 1, nullptr, &items, &local, 0, nullptr, nullptr),
+              "clEnqueueNDRangeKernel");
+      }
     if (pins) m.project_pins(from, global);
   }
   m.download(*from, p, 3 * n * f);
-  m.download(m.seq, s.contacts, s.count * sizeof(gr_seq_contact));
+  for (size_t k = 0; k < parts; ++k) m.download(m.seq[k], s.contacts + part_first(k), part_count(k) * per);
 }
 
 }  // namespace grains::opencl

@@ -172,6 +172,70 @@ TEST_CASE("use_opencl: a gauss_seidel substep agrees with the CPU path's within 
   CHECK(worst <= bound);
 }
 
+// sets an environment variable for a scope, restoring what was there
+struct ScopedEnv {
+  const char* var;
+  bool had;
+  std::string saved;
+  ScopedEnv(const char* v, const std::string& value) : var(v) {
+    const char* before = getenv(var);
+    had = before != nullptr;
+    if (had) saved = before;
+    setenv(var, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (had) setenv(var, saved.c_str(), 1);
+    else unsetenv(var);
+  }
+};
+
+TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give the same bits",
+          "[opencl][gauss_seidel]") {
+  // One device buffer holds at most CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL: 4 GiB, 77 million
+  // contacts of 56 bytes: ten million grains need more), so the contacts go to the device in
+  // parts of whole blocks, each colour's blocks swept part by part. No two blocks of a colour
+  // write one grain, so the parts give the bits one buffer gives. A jittered block of 10,240
+  // grains (ten blocks of 1,024) drops onto the ground for 12 substeps, with every part at most
+  // 1 MiB (GRAINS_OPENCL_MAX_BUFFER_MIB=1: 18,724 contacts) and without the cap.
+  const float r = 0.01f;
+  auto drop = [&](bool capped) {
+    std::unique_ptr<ScopedEnv> cap;
+    if (capped) cap = std::make_unique<ScopedEnv>("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
+    test::Scene s;
+    s.add_collider(test::ground());
+    s.add_jittered_block(40, 16, 16, r);
+    s.s = test::settings(24, 2, 10);
+    s.s.use_opencl = true;
+    for (int k = 0; k < 12; ++k) s.substep();
+    return s;
+  };
+  const test::Scene whole = drop(false), parts = drop(true);
+  REQUIRE(whole.s.contact_solver == kContactGaussSeidel);
+  // the premise: more contacts than one part holds (every touching pair is a contact)
+  size_t touching = 0;
+  for (size_t i = 0; i < whole.size(); ++i)
+    for (size_t j = i + 1; j < whole.size(); ++j) touching += length(whole.pos(i) - whole.pos(j)) < 2.002f * r;
+  INFO(touching << " touching pairs");
+  REQUIRE(touching * sizeof(gr_seq_contact) > (size_t(1) << 20));
+  CHECK(whole.P == parts.P);
+  CHECK(whole.v == parts.v);
+}
+
+TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's largest is refused",
+          "[opencl][bad]") {
+  // A driver need not refuse a buffer over its CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL 3.1 took one of
+  // 4.9 GB with a 4 GiB limit and crashed copying into it): Grains checks. 98,304 grains' positions
+  // are 1.1 MiB, over a cap of 1 MiB.
+  ScopedEnv cap("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
+  test::Scene s;
+  s.add_collider(test::ground());
+  s.add_jittered_block(96, 32, 32, 0.01f);
+  s.s = test::settings(24, 1, 1);
+  s.s.use_opencl = true;
+  CHECK_THROWS_WITH(s.substep(), Catch::Contains("more than the device's largest, 1.0 MiB") &&
+                                     Catch::Contains("run them on the CPU (use_opencl off)"));
+}
+
 TEST_CASE("use_opencl: the same graph gives the same frames run to run", "[opencl]") {
   // A Jacobi work-item writes only its own grain's outputs and sums its contacts in row order;
   // a Gauss-Seidel work-item sweeps one block of contacts in order, and no two blocks swept at
@@ -217,4 +281,7 @@ TEST_CASE("use_opencl without an OpenCL platform, or with a device that is not t
   CHECK_THAT(test::read_text(log), Catch::Contains("GRAINS_OPENCL_DEVICE: no device 0:7"));
   CHECK(run_with("GRAINS_OPENCL_DEVICE", "any", run, log) == 2);
   CHECK_THAT(test::read_text(log), Catch::Contains("GRAINS_OPENCL_DEVICE: 'any' is not PLATFORM:DEVICE"));
+  CHECK(run_with("GRAINS_OPENCL_MAX_BUFFER_MIB", "4GiB", run, log) == 2);
+  CHECK_THAT(test::read_text(log), Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_MAX_BUFFER_MIB: '4GiB' is "
+                                                   "not a whole number of MiB"));
 }

@@ -167,6 +167,7 @@ class GrainsNode : public Node {
     // stiffness fractions k / (substeps x iterations) count the solver's own substeps, so a
     // stiffness means the same whatever error control adds
     st.substeps = ctx.time.base_substeps;
+    st.base_dt = static_cast<float>(1.0 / (ctx.time.fps * std::max(1, ctx.time.base_substeps)));
     st.keep_velocity = ctx.time.stabilize;
     st.threads = ctx.threads;
     return st;

@@ -55,6 +55,9 @@ struct GrainsSettings {
 
   float dt = 1.0f / 48;  // substep length (s)
   int substeps = 1;      // the solver's substeps per frame (stiffness scaling)
+  // the substep those substeps give (s; 0: dt): clumping's pull, a fraction of the gap each
+  // substep, is scaled by (dt / base_dt)^2 when error control takes finer ones (make_params)
+  float base_dt = 0;
   // the first substep after error control refined the step: its constraints remove the overlap
   // the coarser step left, but the grains keep the velocity they started with, since that
   // overlap, resolved in one finer step, would become a speed overlap / dt (from

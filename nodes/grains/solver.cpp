@@ -65,12 +65,12 @@ gr_params make_params(const GrainsSettings& s) {
   k.dt = s.dt;
   k.stiffness_denominator =
       static_cast<float>(std::max(1, s.substeps) * std::max(1, s.constraint_iterations));
-  // Clumping pulls apart grains a fraction of their gap each substep, and PBD makes a move a
-  // speed move / dt: at the solver's substeps that is the help page's clumping, but the finer
-  // substeps error control takes would pull as hard in a fraction of the time, a speed growing
-  // as 1 / dt (settle_10k with clumping at the defaults, 256 substeps: 17 MJ of kinetic energy
-  // in two frames). Scaled by (dt / base_dt)^2 the pull is a force: the same acceleration, gap
-  // x weight / base_dt^2, at any substep.
+  // Clumping pulls two grains that are apart toward contact by a fraction of their gap each
+  // substep, and PBD makes a move a speed move / dt: at the solver's substeps that is the help
+  // page's clumping, but the finer substeps error control takes would pull as hard in a fraction
+  // of the time, a speed growing as 1 / dt (settle_10k with clumping at the defaults, 256
+  // substeps: 17 MJ of kinetic energy in two frames). Scaled by (dt / base_dt)^2 the pull is a
+  // force: at any substep the same acceleration, at most iterations x weight x gap / base_dt^2.
   if (s.base_dt > 0 && s.dt < s.base_dt) k.clumping_weight *= (s.dt / s.base_dt) * (s.dt / s.base_dt);
   const MassShock shock = s.mass_shock();
   k.mass_shock = static_cast<int>(shock);

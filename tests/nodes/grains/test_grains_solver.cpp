@@ -611,7 +611,8 @@ TEST_CASE("clumping pulls nearby grains to contact and holds a hanging chain",
 }
 
 TEST_CASE("clumping pulls as a force at the finer substeps error control takes", "[grains][clumping]") {
-  // Clumping moves apart grains a fraction of their gap a substep; a move is a speed move / dt.
+  // Clumping pulls two grains that are apart toward contact by a fraction of their gap a
+  // substep; a move is a speed move / dt.
   // At the solver's substeps (base_dt) that is POP Grains' clumping; at substeps 64 times finer
   // (error control refines the frame, keeping base_dt) the same fraction would close the gap
   // in a 64th of the time, at 64 times the speed (settle_10k with clumping at the defaults

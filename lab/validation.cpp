@@ -474,7 +474,7 @@ ValidationPlan validation_plan(bool quick) {
     p.aspects = {0.5, 1, 2, 4};
     p.column_radius_grains = 6;
     p.orifices = {6, 7, 8, 9};
-    p.silo = {24, 20, 0.5, 1.25};
+    p.silo = {24, 20, 0.75, 1.5};
     p.frictions = {0.2, 0.5, 1.0};
     p.pile = {10, 12, 6, 0.45, 0.3, 96};
   } else {
@@ -482,7 +482,7 @@ ValidationPlan validation_plan(bool quick) {
     p.aspects = {0.5, 1, 2, 4};
     p.column_radius_grains = 10;
     p.orifices = {5, 6, 7, 8, 9};
-    p.silo = {24, 24, 0.5, 1.5};
+    p.silo = {24, 24, 0.75, 1.75};
     p.frictions = {0.1, 0.2, 0.35, 0.5, 0.75, 1.0};
     p.pile = {12, 18, 6, 0.55, 0.45, 144};
   }

@@ -131,7 +131,7 @@ struct SiloResult {
 struct SiloSize {
   int width_grains = 24;
   int fill_grains = 24;
-  double t_start = 0.5, t_end = 1.5;
+  double t_start = 0.75, t_end = 1.75;
 };
 SiloResult run_silo(const std::string& scene, int orifice_grains, const SiloSize& size,
                     const LawSettings& s, int threads);

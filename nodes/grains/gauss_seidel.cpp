@@ -17,12 +17,17 @@
 // finds again starts with that load, scaled by (dt / dt_last)^2 (a position-level load is a force
 // x dt^2), applied to the predicted positions before the first pass. A load is a force only when
 // it balanced the grain's weight: one that stopped a landing grain or a rearrangement must not be
-// repeated. So each grain i measures how well the repeated loads balance its external step
+// repeated. So each grain i scales the repeated loads to balance its external step
 // G_i = p_i - P_i - dt v_i (gravity and forces over the substep): with D_i the displacement they
-// give it, s_i = clamp(1 - |D_i + G_i| / |G_i|, 0, 1), and a contact starts at the smaller s of
-// its grains times its load. A grain at rest (D = -G) starts fully loaded; a grain under no
-// external force starts cold, as does, with all its contacts, a grain that the scaled loads would
-// leave farther from balance than no load at all (|D' + G| > |G|).
+// give it, s_i = clamp(-(D_i . G_i) / |D_i|^2, 0, 1), the factor that brings s D_i nearest -G_i,
+// and a contact starts at the smaller s of its grains times its load. A grain at rest (D = -G)
+// starts fully loaded, one whose loads also stopped it (D = -1.5 G) with its weight's share of
+// them; a grain under no external force starts cold, as does, with all its contacts, a grain that
+// the scaled loads would leave farther from balance than no load at all (|D' + G| > |G|).
+// (The factor was 1 - |D + G| / |G|, which measured the balance rather than fitting it: it gave
+// that grain three quarters of its weight, and two passes of a short substep did not find the
+// rest; the grains of a settled box then sank a little every substep and pre-stabilization
+// lifted them back, 40-64 passes a substep at 20 x 2, docs/heap-angle.md.)
 //
 // The passes run in the contacts' order (grain pairs by the lower index, then its planes) within
 // blocks of kBlockGrains grains (a contact belongs to its lower index's block), the blocks in
@@ -54,8 +59,10 @@ namespace grains {
 namespace {
 
 constexpr uint32_t kPlaneKey = 0x80000000u;
-// the most a warm start may throw a grain off balance beyond its external step, in radii
+// the most a warm start may throw a grain off balance beyond its external step, in radii, and
+// the most of that it may lift the grain against it
 constexpr float kWarmSlack = 0.1f;
+constexpr float kWarmLift = 0.05f;
 // pre-stabilization stops when its largest move has not fallen at all over 4 passes: grains
 // wedged between sleepers repeated 0.0028 r for 50 passes; converging passes fall, if slowly
 // (1% a pass in the DEM collapse; a column of 100 grains stopped at 0.5% over 4 passes bounced
@@ -277,9 +284,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       }
       const gr_float3 G = gr_sub(gr_sub(gr_load3(p, i), gr_load3(P, i)), gr_scale(gr_load3(g.v, i), dt));
       external[i] = G;
-      const float gl = gr_length(G);
-      if (gl > 0.0f)
-        balance[i] = std::clamp(1.0f - gr_length(gr_add(repeat[i], G)) / gl, 0.0f, 1.0f);
+      const float dd = gr_dot(repeat[i], repeat[i]);
+      if (gr_dot(G, G) > 0.0f && dd > 0.0f)
+        balance[i] = std::clamp(-gr_dot(repeat[i], G) / dd, 0.0f, 1.0f);
     }
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
     for (long k = 0; k < lm; ++k) {
@@ -294,16 +301,23 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // 1.7 radii at 1000:1. Each such grain starts cold, all its contacts with it, until none is
     // left (a round cuts at least one). With |G| alone the cuts ran down the DEM column from
     // every grain that was moving and it slumped to H / L0 1.54; at r / 4 a 200-grain column
-    // under mass-shock scaling gained energy (docs/heap-angle.md).
+    // under mass-shock scaling gained energy (docs/heap-angle.md). Nor may they lift it against
+    // G by more than r / 20: with the fitted factors above, the lighter grains of that column
+    // were lifted up to r / 10 a substep, and it rose 1.2 mm above where it stood; at r / 50
+    // the settled box's grains, starting too often cold, sank again each substep.
     std::vector<uint8_t>& cold = warm_cold_;
     cold.assign(n, 0);
     for (int cut = 1; cut;) {
       cut = 0;
       sum_repeat();
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-      for (int i = 0; i < ni; ++i)
-        cold[i] = g.inv_mass[i] > 0.0f && gr_length(gr_add(repeat[i], external[i])) >
-                                                std::max(gr_length(external[i]), kWarmSlack * g.radius[i]);
+      for (int i = 0; i < ni; ++i) {
+        const gr_float3 off = gr_add(repeat[i], external[i]);  // D' + G
+        const float el = gr_length(external[i]);
+        const float lift = el > 0.0f ? -gr_dot(off, external[i]) / el : 0.0f;
+        cold[i] = g.inv_mass[i] > 0.0f && (gr_length(off) > std::max(el, kWarmSlack * g.radius[i]) ||
+                                           lift > kWarmLift * g.radius[i]);
+      }
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel) reduction(| : cut)
       for (long k = 0; k < lm; ++k) {
         const SeqContact& q = seq_[k];

@@ -302,9 +302,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // left (a round cuts at least one). With |G| alone the cuts ran down the DEM column from
     // every grain that was moving and it slumped to H / L0 1.54; at r / 4 a 200-grain column
     // under mass-shock scaling gained energy (docs/heap-angle.md). Nor may they lift it against
-    // G by more than r / 20: with the fitted factors above, the lighter grains of that column
-    // were lifted up to r / 10 a substep, and it rose 1.2 mm above where it stood; at r / 50
-    // the settled box's grains, starting too often cold, sank again each substep.
+    // G by more than r / 20: with the fitted factors above, which the bound before let lift a
+    // grain up to r / 10 a substep, that column rose 1.2 mm above where it stood; at r / 50 the
+    // settled box's grains, starting too often cold, sank again each substep.
     std::vector<uint8_t>& cold = warm_cold_;
     cold.assign(n, 0);
     for (int cut = 1; cut;) {

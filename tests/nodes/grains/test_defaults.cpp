@@ -136,6 +136,62 @@ TEST_CASE("use_opencl: stacks of 50 and 100 grains stand within 1% of N d on the
   check_stacks({{"use_opencl", true}, {"contact_solver", "jacobi"}});
 }
 
+TEST_CASE("gauss_seidel: a box of 2,304 grains settles and holds still at 20 substeps x 2 passes",
+          "[grains][gauss_seidel][rest]") {
+  // A block of 12 x 16 x 12 grains of 2 cm (lattice jittered by a tenth of d) dropped 0.3 m into
+  // a 0.34 m square box, at 20 substeps of 2 passes, error control off, sleeping at its default.
+  // With two passes a substep the contacts hold the box's weight only through the loads the warm
+  // start carries over: a factor that gives a grain less than its weight's share leaves it to
+  // sink a little every substep, pre-stabilization lifting it back, and its velocity reads the
+  // sinking. Settled, the grains must move slower than what wakes a sleeper: over the last half
+  // second of 2 s their rms speed stays under 4 x sleep_speed (2 r a second, 20 mm/s), the speed
+  // of a neighbour that wakes a sleeping grain. (Measured: 1.8-7.5 mm/s, frame to frame, with
+  // each grain's loads fitted to its external step; with the earlier factor 1 - |D + G| / |G|,
+  // up to 63 mm/s, and pre-stabilization ran 40 passes a substep instead of 20.)
+  const float d = 0.02f, r = d / 2;
+  ParticleStore pts;
+  uint32_t seed = 12345;
+  auto jitter = [&] {
+    seed = seed * 1664525u + 1013904223u;
+    return (static_cast<float>(seed >> 8) / 16777216.0f - 0.5f) * 0.1f * d;
+  };
+  for (int x = 0; x < 12; ++x)
+    for (int y = 0; y < 16; ++y)
+      for (int z = 0; z < 12; ++z)
+        add_grain(pts, {(x - 5.5f) * d + jitter(), 0.3f + y * d + jitter(), (z - 5.5f) * d + jitter()},
+                  r, 1.0f);
+  const size_t n = pts.size();
+  json colliders = json::array({kGround});
+  const double half = 0.17;
+  const json walls[] = {{{"normal", {1, 0, 0}}, {"translate", {-half, 0, 0}}},
+                        {{"normal", {-1, 0, 0}}, {"translate", {half, 0, 0}}},
+                        {{"normal", {0, 0, 1}}, {"translate", {0, 0, -half}}},
+                        {{"normal", {0, 0, -1}}, {"translate", {0, 0, half}}}};
+  for (int w = 0; w < 4; ++w) {
+    json p = walls[w];
+    p["shape"] = "plane";
+    colliders.push_back({{"name", "wall" + std::to_string(w)}, {"type", "collider"}, {"params", p}});
+  }
+  Simulation sim(defaults_graph({{"particle_separation", d},
+                                 {"constraint_iterations", 2},
+                                 {"friction_with_particles", 1},
+                                 {"friction_with_colliders", 1}},
+                                {{"error_control", false}, {"substeps", 20}}, colliders));
+  sim.set_points(0, std::move(pts));
+  double most = 0;  // the largest mean square speed over the last 12 frames
+  for (int f = 0; f < 48; ++f) {
+    sim.step_frame();
+    if (f < 36) continue;
+    const ParticleStore& s = sim.object(0).pts;
+    double sum = 0;
+    for (size_t k = 0; k < n; ++k) sum += dot(load3(s.v3_if("v"), k), load3(s.v3_if("v"), k));
+    most = std::max(most, sum / n);
+  }
+  const double rms = std::sqrt(most), wake_speed = 4 * 0.5 * r;
+  INFO("rms speed over the last 0.5 s at most " << rms << " m/s");
+  CHECK(rms < wake_speed);
+}
+
 TEST_CASE("a grain on a 15 degree slope of fixed grains sticks under Coulomb friction",
           "[grains][defaults][friction]") {
   // A slope of fixed grains (mass 0) tilted 15 degrees, its grains r apart on a square grid so

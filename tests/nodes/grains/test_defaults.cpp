@@ -91,6 +91,28 @@ TEST_CASE("stacks of 50 and 100 grains stand within 1% of N d at the defaults",
   check_stacks(json::object());
 }
 
+TEST_CASE("error control: the first frame starts at max_substeps and coarsens once the loads are built",
+          "[grains][defaults][error_control]") {
+  // A column of 50 touching 1 cm grains at rest at the defaults. Nothing is known of its loads
+  // before the first substep, so the first frame starts at max_substeps (256); its overlaps stay
+  // far under the tolerance, so once 8 fine substeps have built the loads it continues at the 32
+  // substeps the grains' fall asks for (gauss_seidel's bound, r / 256 a substep: 30 for 1 cm
+  // grains at 24 fps, the next power of two), refining again where a substep's error asks (53
+  // substeps in all, measured). Less than half of 256 is asserted; a tolerance the overlaps
+  // exceed keeps all 256. The column still stands within 1% of N d (the stacks test above).
+  auto first_frame = [](const json& solver) {
+    const float r = 0.005f, d = 2 * r;
+    ParticleStore pts;
+    for (int k = 0; k < 50; ++k) add_grain(pts, {0, r + d * k, 0}, r, 1.3e-3f);
+    Simulation sim(defaults_graph({{"particle_separation", d}}, solver, json::array({kGround})));
+    sim.set_points(0, std::move(pts));
+    sim.step_frame();
+    return sim.object(0).stats.substeps;
+  };
+  CHECK(first_frame(json::object()) < 128);
+  CHECK(first_frame({{"error_tolerance", 1e-9}}) == 256);
+}
+
 TEST_CASE("contact_solver jacobi: stacks of 50 and 100 grains stand within 1% of N d",
           "[grains][defaults]") {
   // the same columns and bounds with the Jacobi average of POP Grains (the defaults project the

@@ -347,8 +347,9 @@ void Simulation::step_object(SimObject& obj) {
     }
     ++taken;
     frame_error = std::max(frame_error, substep_error);
+    // what the grains' motion asks of the rest of the frame (read by both rules below)
+    const int need = control && s + 1 < substeps ? motion_substeps(pts, graph_.fps, most, bounds) : 0;
     if (probing && s + 1 < substeps) {
-      const int need = motion_substeps(pts, graph_.fps, most, bounds);
       const int coarse = refine_to(base, need, most);
       if (!(frame_error < 0.2f * tolerance) || coarse >= substeps) {
         probing = false;
@@ -363,7 +364,6 @@ void Simulation::step_object(SimObject& obj) {
       // the error falls about as dt^2: refine by the power of two whose square covers it, and
       // at least as far as the grains' motion asks
       int factor = 1;
-      const int need = motion_substeps(pts, graph_.fps, most, bounds);
       while (substeps * factor * 2 <= most &&
              (static_cast<double>(factor) * factor * tolerance < substep_error ||
               substeps * factor < need))

@@ -1,6 +1,7 @@
 // Shared helpers for tests: graphs from inline JSON, temporary folders, the grains and
 // grains-lab binaries.
 #pragma once
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -27,5 +28,19 @@ std::string read_text(const std::string& path);
 // The fields of s between separators (a CSV line).
 std::vector<std::string> split(const std::string& s, char sep);
 std::string source_dir();
+
+// A fixed sequence of numbers in [0, 1) (a linear congruential generator): jittered lattices
+// that are the same on every machine and for every thread count.
+class Sequence {
+ public:
+  explicit Sequence(uint32_t seed = 12345) : h_(seed) {}
+  float next() {
+    h_ = h_ * 1664525u + 1013904223u;
+    return static_cast<float>(h_ >> 8) / 16777216.0f;
+  }
+
+ private:
+  uint32_t h_;
+};
 
 }  // namespace grains::test

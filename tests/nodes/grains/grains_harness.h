@@ -11,6 +11,7 @@
 
 #include "engine/collider.h"
 #include "nodes/grains/solver.h"
+#include "tests/support/support.h"
 
 namespace grains::test {
 
@@ -201,11 +202,8 @@ struct Scene {
   // an nx x ny x nz block of grains of radius r, 2r apart from the origin corner with the bottom
   // layer resting on y = 0, each coordinate jittered by up to +-0.005 m (a fixed sequence)
   void add_jittered_block(int nx, int ny, int nz, float r) {
-    uint32_t h = 12345;
-    auto jitter = [&h]() {
-      h = h * 1664525u + 1013904223u;
-      return (static_cast<float>(h >> 8) / 16777216.0f - 0.5f) * 0.01f;
-    };
+    Sequence seq;
+    auto jitter = [&seq]() { return (seq.next() - 0.5f) * 0.01f; };
     for (int x = 0; x < nx; ++x)
       for (int y = 0; y < ny; ++y)
         for (int z = 0; z < nz; ++z)

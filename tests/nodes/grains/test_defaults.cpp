@@ -172,11 +172,8 @@ TEST_CASE("gauss_seidel: a box of 2,304 grains settles and holds still at 20 sub
   // up to 63 mm/s, and pre-stabilization ran 40 passes a substep instead of 20.)
   const float d = 0.02f, r = d / 2;
   ParticleStore pts;
-  uint32_t seed = 12345;
-  auto jitter = [&] {
-    seed = seed * 1664525u + 1013904223u;
-    return (static_cast<float>(seed >> 8) / 16777216.0f - 0.5f) * 0.1f * d;
-  };
+  test::Sequence seq;
+  auto jitter = [&] { return (seq.next() - 0.5f) * 0.1f * d; };
   for (int x = 0; x < 12; ++x)
     for (int y = 0; y < 16; ++y)
       for (int z = 0; z < 12; ++z)

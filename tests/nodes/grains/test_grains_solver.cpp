@@ -377,11 +377,8 @@ void check_threads(void (*setup)(GrainsSettings&), int side = 8, std::vector<int
     sc.s.threads = threads;
     setup(sc.s);
     sc.add_collider(ground());
-    unsigned seed = 12345;
-    auto rnd = [&] {
-      seed = seed * 1664525u + 1013904223u;
-      return static_cast<float>(seed >> 8) / 16777216.0f;
-    };
+    test::Sequence seq;
+    auto rnd = [&] { return seq.next(); };
     for (int a = 0; a < side; ++a)
       for (int b = 0; b < side; ++b)
         for (int c = 0; c < side; ++c)

@@ -660,6 +660,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   } else {
     seq_loads_.clear();
     seq_table_.clear();
+    seq_valid_ = false;
     iterate(c);
   }
 
@@ -1418,6 +1419,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.value(seq_dt_);
   r.array(seq_loads_);
   index_loads();
+  seq_valid_ = false;
 }
 
 // ---- contact history ----

@@ -133,9 +133,13 @@ class GrainsSolver {
                size_t collider_count, GrainsStats* stats = nullptr);
   // What one substep leaves for the next, at a frame's end (Node::save_state): the neighbour
   // rows kept for Verlet reuse and how they were built, the contact history, rigid shape
-  // matching's components and rest shapes. The rest is scratch, rebuilt in every substep.
+  // matching's components and rest shapes, the loads gauss_seidel's contacts ended with. The
+  // rest is scratch, rebuilt in every substep or, like gauss_seidel's contact list, kept while
+  // what it was built from holds and rebuilt after a load_state (with the same result).
   void save_state(StateWriter& w) const;
   void load_state(StateReader& r);
+  // substeps so far whose gauss_seidel contact list was the last substep's (seq_list_kept)
+  size_t contact_lists_kept() const { return seq_lists_kept_; }
   // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
   // it searched none (no contacts and no clumping). Valid until the next substep.
   const NeighborList* candidates() const { return candidates_on_ ? &neighbors_ : nullptr; }
@@ -258,6 +262,18 @@ class GrainsSolver {
   std::vector<uint32_t> block_link_start_, block_link_to_;
   std::vector<int32_t> block_colour_;
   void colour_blocks();
+  // seq_ and its blocks are kept for the next substep when everything they were built from is
+  // the same (seq_list_kept): the neighbour rows (kept by keep_rows), the collider planes, and
+  // each grain's inverse mass, repulsion scale and friction (seq_grain_, 3 a grain; this
+  // substep's in seq_grain_now_) under the same friction scales; seq_valid_ says seq_ holds the
+  // last substep's list
+  bool seq_valid_ = false;
+  size_t seq_lists_kept_ = 0;
+  std::vector<float> seq_grain_, seq_grain_now_;
+  std::vector<gr_uint> seq_plane_offsets_;
+  std::vector<int32_t> seq_plane_collider_;
+  float seq_friction_[2] = {0, 0};
+  bool seq_list_kept(const SubstepContext& c, bool pairs, const std::vector<float>& grain) const;
   std::vector<SeqLoad> seq_loads_;
   float seq_dt_ = 0;  // the substep the loads were built in
   // seq_loads_ by key: an open-addressed table of indices + 1 (0: empty), a power of two long

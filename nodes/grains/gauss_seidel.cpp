@@ -76,6 +76,8 @@ constexpr float kWarmLift = 0.05f;
 // (1% a pass in the DEM collapse; a column of 100 grains stopped at 0.5% over 4 passes bounced
 // off its top) (docs/heap-angle.md, "Sleeping")
 constexpr int kStallPasses = 4;
+// the most pre-stabilization passes of a substep without carried loads (see there)
+constexpr int kColdStabilizeIterations = 4096;
 // grains a block (colour_blocks)
 constexpr uint32_t kBlockGrains = 1024;
 // the fewest contacts a substep's passes share out among threads: below, a pass is a few
@@ -233,8 +235,14 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // alike (no velocity, no friction). Not capped by the iterations, as the Jacobi passes are: an
   // overlap left to the passes becomes a velocity overlap / dt, which grows as the substeps
   // shrink (a DEM-settled column, whose soft contacts overlap 0.4% of d, burst at 128 substeps
-  // with 10 passes and ran out 1.06 L0; converged, 0.86 L0, DEM's)
+  // with 10 passes and ran out 1.06 L0; converged, 0.86 L0, DEM's). A substep that starts
+  // without carried loads (the first of a run) removes the overlap its input came with, however
+  // deep, for up to kColdStabilizeIterations passes: the DEM column's first substep still moved
+  // grains 0.083 r after 64 passes and needed 542, and what the cap left became velocity
+  // (overlap / dt, 2.5 m/s at 256 substeps a frame), which kept error control at 256 substeps
+  // for two frames and ran the column out 0.93 L0 instead of 0.86
   if (c.s.pre_stabilization) {
+    const int most_passes = warm ? kStabilizeIterations : kColdStabilizeIterations;
     P_stable_.assign(P, P + 3 * n);
     P_stable_.push_back(0.0f);
     float* x = P_stable_.data();
@@ -258,7 +266,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       }
       return -q.k * C / g.radius[q.i];
     };
-    for (int pass = 0; pass < kStabilizeIterations; ++pass) {
+    for (int pass = 0; pass < most_passes; ++pass) {
       const float moved = sweep(stabilize);
       if (!(moved > kStabilizeTolerance)) break;
       if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) break;

@@ -508,7 +508,8 @@ TEST_CASE("with the contacts one at a time, a packing that starts overlapping co
   sc.substep();
   float fastest = 0;
   for (size_t i = 0; i < sc.size(); ++i) fastest = std::max(fastest, length(sc.vel(i)));
-  const float bound = 0.002f * 0.005f / sc.s.dt + kG * sc.s.dt;
+  const float r = pscale[0];  // every grain of the packing: 0.005 m
+  const float bound = 0.002f * r / sc.s.dt + kG * sc.s.dt;
   report("DEM packing, first substep: fastest grain (m/s)", fastest);
   CHECK(fastest < bound);
 }

@@ -78,6 +78,8 @@ constexpr float kWarmLift = 0.05f;
 constexpr int kStallPasses = 4;
 // the most pre-stabilization passes of a substep without carried loads (see there)
 constexpr int kColdStabilizeIterations = 4096;
+// load_of_: a kept contact's load is its own
+constexpr uint32_t kLoadInPlace = 0xffffffffu;
 // grains a block (colour_blocks)
 constexpr uint32_t kBlockGrains = 1024;
 // the fewest contacts a substep's passes share out among threads: below, a pass is a few
@@ -229,6 +231,24 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     return most;
   };
 
+  // each contact's carried load (the warm start's), found once: seq_loads_ index + 1, 0 for none;
+  // with a kept list the contact holds its own (kLoadInPlace)
+  std::vector<uint32_t>& load_of = load_of_;
+  if (warm) {
+    load_of.resize(seq_.size());
+    const long lm = static_cast<long>(seq_.size());
+#pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
+    for (long k = 0; k < lm; ++k) {
+      const SeqContact& q = seq_[k];
+      if (kept) {
+        load_of[k] = q.ln > 0.0f ? kLoadInPlace : 0u;
+      } else {
+        const SeqLoad* it = find_load(q.key);
+        load_of[k] = it ? static_cast<uint32_t>(it - seq_loads_.data()) + 1u : 0u;
+      }
+    }
+  }
+
   // pre-stabilization (Macklin et al. 2014 sec. 4.4), passes in the same order until no
   // contact moves its grain more than kStabilizeTolerance of its radius (at most
   // kStabilizeIterations): the overlap of the start positions, removed from start and prediction
@@ -246,6 +266,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     P_stable_.assign(P, P + 3 * n);
     P_stable_.push_back(0.0f);
     float* x = P_stable_.data();
+    // what the contacts that carried a load moved each grain (the velocity it came with, below)
+    const bool made = warm && !c.s.keep_velocity;
+    if (made) carried_move_.assign(3 * n, 0.0f);
+    float* moved_by_carried = carried_move_.data();
     // the largest move of the last kStallPasses passes: sweeps whose largest move no longer
     // falls over kStallPasses passes are going round in a circle, grains wedged between fixed
     // ones (sleepers) whose overlaps no placement of them removes
@@ -256,13 +280,16 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       const float C = geometry_at(x, q, &nrm);
       if (!(C < 0.0f)) return 0.0f;
       const gr_float3 d = gr_scale(nrm, -q.k * C);
+      const bool carried = made && load_of[static_cast<size_t>(&q - seq_.data())] != 0u;
       if (q.moves & 1u) {
         gr_seq_move(x, q.i, d, q.share);
         gr_seq_move(p, q.i, d, q.share);
+        if (carried) gr_seq_move(moved_by_carried, q.i, d, q.share);
       }
       if (q.moves & 2u) {
         gr_seq_move(x, q.j, d, -(1.0f - q.share));
         gr_seq_move(p, q.j, d, -(1.0f - q.share));
+        if (carried) gr_seq_move(moved_by_carried, q.j, d, -(1.0f - q.share));
       }
       return -q.k * C / g.radius[q.i];
     };
@@ -271,6 +298,36 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       if (!(moved > kStabilizeTolerance)) break;
       if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) break;
       recent[pass % kStallPasses] = moved;
+    }
+    // The velocity that made the overlap. A contact that carried a load was touching when the
+    // last substep ended; the overlap it has now is the part of that substep's motion its passes
+    // did not stop, which a converged substep would have stopped, velocity and all. Removing the
+    // overlap from start and prediction alike keeps that velocity, and with few passes a
+    // packing kept sinking into its contacts at it, pre-stabilization lifting it back each
+    // substep: 10,000 settled grains at 40 x 1 reported 0.07 m/s downward while moving
+    // 0.005 m/s, and took 32 pre-stabilization passes a substep (docs/heap-angle.md). So each
+    // grain loses the component of its velocity against m_i, what the carried contacts moved
+    // it, up to |m_i| / dt_last (the speed that overlap needed); a grain is never given speed.
+    // Only carried contacts: a new contact's overlap was made by emission or by a neighbour's
+    // fall, and a grain of a falling stream pushed off an emitted one lost its share of the
+    // common fall sideways (grains 2.4 m/s off the DEM pile's stream).
+    if (made) {
+      float* v = c.d.v;
+      const float inv_last = 1.0f / seq_dt_;
+#pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
+      for (int i = 0; i < ni; ++i) {
+        if (!(g.inv_mass[i] > 0.0f)) continue;
+        const gr_float3 m = gr_load3(moved_by_carried, i);
+        const float length = gr_length(m);
+        if (!(length > 0.0f)) continue;
+        const gr_float3 u = gr_scale(m, 1.0f / length);
+        const gr_float3 vi = gr_load3(v, i);
+        const float against = gr_dot(vi, u);
+        if (!(against < 0.0f)) continue;
+        const float cut = std::max(against, -length * inv_last);  // <= 0
+        gr_store3(v, i, gr_madd(vi, u, -cut));
+        gr_store3(p, i, gr_madd(gr_load3(p, i), u, -cut * dt));
+      }
     }
     c.g.P = P = x;
   }
@@ -291,13 +348,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     for (long k = 0; k < lm; ++k) {
       SeqContact& q = seq_[k];
       gr_float3 t;
+      if (!load_of[k]) continue;
       if (kept) {
-        if (!(q.ln > 0.0f)) continue;
         q.ln *= scale;
         t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), scale);
       } else {
-        const SeqLoad* it = find_load(q.key);
-        if (!it) continue;
+        const SeqLoad* it = &seq_loads_[load_of[k] - 1u];
         // stored on the grain of the lower id
         const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
         q.ln = it->ln * scale;

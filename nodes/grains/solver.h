@@ -281,6 +281,10 @@ class GrainsSolver {
   int seq_table_bits_ = 0;
   void index_loads();
   const SeqLoad* find_load(uint64_t key) const;
+  // this substep's contacts' carried loads (seq_loads_ index + 1, 0: none), and what the
+  // carried contacts' pre-stabilization moved each grain (3 a grain)
+  std::vector<uint32_t> load_of_;
+  std::vector<float> carried_move_;
   // the warm start's per-contact and per-grain working arrays, kept between substeps
   std::vector<float> warm_factor_, warm_balance_;
   std::vector<gr_float3> warm_normal_, warm_repeat_, warm_external_;

@@ -45,16 +45,19 @@ TEST_CASE("silo discharge: Beverloo's 5/2 law over four orifice widths", "[valid
   // moves the fitted n by about 0.2 over D/d = 6..9, and the rates' statistical scatter (about
   // 5% per orifice, lever arm ln(7.6/4.6) = 0.5) by about 0.1.
   // At the defaults (each contact its own Coulomb cone, gauss_seidel) the quick plan's fit has
-  // n = 2.75 and k = 1.90 (2026-11-29; 2.85 and 2.14 before the warm start fitted its loads to
-  // each grain's weight, docs/heap-angle.md), so the exponent and k are reported, not
-  // asserted.
+  // n = 2.40 and k = 1.04 (2026-11-29, with pre-stabilization taking the velocity that made an
+  // overlap; 2.75 and 1.86 before, 2.85 and 2.14 before the warm start fitted its loads to each
+  // grain's weight, docs/heap-angle.md), so the exponent and k are reported, not asserted.
   CHECK_NOFAIL(f.exponent_k14 == Approx(2.5).margin(0.3));
   // With n = 5/2 the Beverloo plot (rate^(2/5) against D) is a line. Its r2 is bounded by the
-  // rates' scatter: over D/d = 5..9 the values (D - k d) span 3.5..7.5 (variance about 2.2 in
-  // units of d); a scatter s on each rate is 0.4 s on rate^(2/5), so r2 = 1 - (0.4 s x 5.5)^2 / 2.2.
-  // The 5% estimated above gives 0.995; runs scatter up to about 10% (the solver's ordering of
-  // grains shifts which grains jam at the orifice), which gives 0.978.
-  CHECK(f.r2_linear > 0.975);
+  // rates' scatter: over the quick plan's D/d = 6..9 the values (D - k d) span 4.6..7.6 (mean
+  // 6.1, variance 1.25 in units of d); a scatter s on each rate is 0.4 s on rate^(2/5), so
+  // r2 = 1 - (0.4 s x 6.1)^2 / 1.25. The 5% estimated above gives 0.988; runs scatter up to
+  // about 10% (the solver's ordering of grains shifts which grains jam at the orifice), which
+  // gives 0.952. (The bound was 0.975, worked out with the full plan's 5..9, variance 2.2.)
+  // Measured 0.967 (2026-11-29: 804, 1256, 2175, 2529 grains/s, the 8 d run 10% above the
+  // line through the others).
+  CHECK(f.r2_linear > 0.952);
   // its zero, k, lies in the range reported for spheres, 1 to 3 (Nedderman 1982 quotes 1-3;
   // 1.4 the common value, DEM 1.57-1.68)
   CHECK_NOFAIL(f.k_linear > 1.0);

@@ -105,12 +105,10 @@ Rest pour_and_rest(double sleep_speed) {
 
 TEST_CASE("sleeping: a poured heap stops, within 1 degree and 1e-6 J a grain over 2 s",
           "[grains][sleeping]") {
-  // At the node's default sleep_speed (half a radius a second, 5 mm/s here). Without sleeping
-  // the resting heap's grains report about half a substep's fall (g dt / 2,
-  // 3 mm/s at 64 substeps: the iterations leave part of each substep's fall, which the next
-  // pre-stabilization lifts without velocity), 5e-6 J a 1 kg grain, and its upper layers creep:
-  // the demo's heap sinks 9 mm and loses 2.5 degrees in 2 s. Asleep, a grain has v = 0 and holds
-  // still.
+  // At the node's default sleep_speed (half a radius a second, 5 mm/s here). Asleep, a grain
+  // has v = 0 and holds still. Awake, the heap's grains keep moving a little: its peak sinks
+  // 3.0 mm in the 2 s and its grains report 6e-7 J a 1 kg grain (measured; 5e-6 J and a heap
+  // that lost 2.5 degrees before pre-stabilization took the velocity that made an overlap).
   const Rest on = pour_and_rest(0.5);
   INFO("sleeping: frame 72 " << on.settled.angle_deg << " deg (cone " << on.settled.cone_deg
                              << ", peak " << on.settled.peak << " m), frame 120 "
@@ -125,7 +123,8 @@ TEST_CASE("sleeping: a poured heap stops, within 1 degree and 1e-6 J a grain ove
                           << " m), frame 120 " << off.later.angle_deg << " deg (peak "
                           << off.later.peak << " m), kinetic energy " << off.energy
                           << " J a grain");
-  CHECK(off.energy > 1e-6);
+  CHECK(off.energy > 0.0);
+  CHECK(std::fabs(off.later.peak - off.settled.peak) > std::fabs(on.later.peak - on.settled.peak));
 }
 
 namespace {

@@ -123,7 +123,8 @@ TEST_CASE("sleeping: a poured heap stops, within 1 degree and 1e-6 J a grain ove
                           << " m), frame 120 " << off.later.angle_deg << " deg (peak "
                           << off.later.peak << " m), kinetic energy " << off.energy
                           << " J a grain");
-  CHECK(off.energy > 0.0);
+  // sleep_speed changes the result: awake, the heap keeps more motion and sinks farther
+  CHECK(off.energy > on.energy);
   CHECK(std::fabs(off.later.peak - off.settled.peak) > std::fabs(on.later.peak - on.settled.peak));
 }
 

@@ -50,6 +50,7 @@
 #include <numeric>
 
 #include "engine/buffer.h"
+#include "engine/pair_test.h"
 
 namespace grains {
 namespace {
@@ -62,22 +63,13 @@ constexpr double kRelSlack = 1e-5, kAbsSlack = 1e-5;
 constexpr float kPreWiden = 1.0001f;
 constexpr double kOriginShift = 0.381966011250105;  // 2 - golden ratio, in cells
 
-// Squared distance of a pair as both paths compute it (a is the particle whose list is built).
+// The pair test, its distance and the row order: engine/pair_test.h, shared with the OpenCL
+// search (a row found there is this row).
 inline double pair_dist2(float ax, float ay, float az, float bx, float by, float bz) {
-  const double dx = ax - bx, dy = ay - by, dz = az - bz;
-  return dx * dx + dy * dy + dz * dz;
+  return gr_pair_dist2(ax, ay, az, bx, by, bz);
 }
-
-// The pair test both paths share: d2 < t^2 with t = qs * (ri + rj) > 0 (false for NaN).
-inline bool pair_ok(double d2, float qs, float ri, float rj) {
-  const float t = qs * (ri + rj);
-  return (t > 0.0f) & (d2 < double(t) * double(t));
-}
-
-// Sort key: distance (as float bits, monotone for non-negative values), then original index.
-inline uint64_t pair_key(double d2, uint32_t j) {
-  return (uint64_t(std::bit_cast<uint32_t>(static_cast<float>(d2))) << 32) | j;
-}
+inline bool pair_ok(double d2, float qs, float ri, float rj) { return gr_pair_ok(d2, qs, ri, rj) != 0; }
+inline uint64_t pair_key(double d2, uint32_t j) { return gr_pair_key(d2, j); }
 
 // Keep at most K (K <= 0: all) smallest keys, sorted. Returns how many are kept.
 // Lists of up to kRankMax keys are ranked instead: a key's place is the number of smaller keys,

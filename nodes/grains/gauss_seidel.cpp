@@ -202,7 +202,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     return gr_seq_geometry(&g, x, &q, nrm);
   };
   auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
-  auto apart_at = [&](const float* x, const SeqContact& q) { return gr_seq_apart(&g, x, &q) != 0; };
   auto apply = [&](const SeqContact& q, gr_float3 d) { gr_seq_apply(p, &q, d); };
   // body(q) over every contact, colour by colour, block by block, a colour's blocks shared out
   // among the threads when there are enough contacts; returns the largest body returned
@@ -274,30 +273,30 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // falls over kStallPasses passes are going round in a circle, grains wedged between fixed
     // ones (sleepers) whose overlaps no placement of them removes
     float recent[kStallPasses] = {};
-    auto stabilize = [&](const SeqContact& q) -> float {
-      if (apart_at(x, q)) return 0.0f;
-      gr_float3 nrm;
-      const float C = geometry_at(x, q, &nrm);
-      if (!(C < 0.0f)) return 0.0f;
-      const gr_float3 d = gr_scale(nrm, -q.k * C);
-      const bool carried = made && load_of[static_cast<size_t>(&q - seq_.data())] != 0u;
-      if (q.moves & 1u) {
-        gr_seq_move(x, q.i, d, q.share);
-        gr_seq_move(p, q.i, d, q.share);
-        if (carried) gr_seq_move(moved_by_carried, q.i, d, q.share);
-      }
-      if (q.moves & 2u) {
-        gr_seq_move(x, q.j, d, -(1.0f - q.share));
-        gr_seq_move(p, q.j, d, -(1.0f - q.share));
-        if (carried) gr_seq_move(moved_by_carried, q.j, d, -(1.0f - q.share));
-      }
-      return -q.k * C / g.radius[q.i];
-    };
-    for (int pass = 0; pass < most_passes; ++pass) {
-      const float moved = sweep(stabilize);
-      if (!(moved > kStabilizeTolerance)) break;
-      if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) break;
+    // whether another pass follows one whose largest move was `moved`
+    auto go_on = [&](int pass, float moved) {
+      if (!(moved > kStabilizeTolerance)) return false;
+      if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) return false;
       recent[pass % kStallPasses] = moved;
+      return true;
+    };
+    if (c.s.use_opencl) {
+      // on the device, the same passes in the same order (opencl/iterations.h)
+      opencl::SequentialContacts on = device_contacts();
+      std::vector<uint8_t>& flag = carried_flag_;
+      if (made) {
+        flag.resize(seq_.size());
+        for (size_t k = 0; k < seq_.size(); ++k) flag[k] = load_of[k] != 0u;
+      }
+      open_device().stabilize_sequential(g, prm, device_sizes(c), x, p, made ? moved_by_carried : nullptr,
+                                         made ? flag.data() : nullptr, on, most_passes, go_on);
+    } else {
+      auto stabilize = [&](const SeqContact& q) -> float {
+        const bool carried = made && load_of[static_cast<size_t>(&q - seq_.data())] != 0u;
+        return gr_seq_stabilize(&g, x, p, carried ? moved_by_carried : nullptr, &q);
+      };
+      for (int pass = 0; pass < most_passes && go_on(pass, sweep(stabilize)); ++pass) {
+      }
     }
     // The velocity that made the overlap. A contact that carried a load was touching when the
     // last substep ended; the overlap it has now is the part of that substep's motion its passes
@@ -465,14 +464,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // the passes on the device, the same pass in the same order (opencl/iterations.h); shape
     // matching stays here, so with shapes each pass is a call of its own and the pins follow
     // the shapes here
-    opencl::SequentialContacts on;
-    on.contacts = seq_.data();
-    on.count = seq_.size();
-    on.block_start = block_start_.data();
-    on.blocks = block_start_.size() - 1;
-    on.colour_blocks = colour_blocks_.data();
-    on.colour_start = colour_start_.data();
-    on.colours = colour_start_.size() - 1;
+    opencl::SequentialContacts on = device_contacts();
     on.relax = relax;
     on.others = other_groups ? &others : nullptr;
     on.others_prm = &others_prm;
@@ -547,6 +539,19 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   }
   index_loads();
   seq_dt_ = dt;
+}
+
+// the contacts, their blocks and colours as the device takes them
+opencl::SequentialContacts GrainsSolver::device_contacts() {
+  opencl::SequentialContacts on;
+  on.contacts = seq_.data();
+  on.count = seq_.size();
+  on.block_start = block_start_.data();
+  on.blocks = block_start_.size() - 1;
+  on.colour_blocks = colour_blocks_.data();
+  on.colour_start = colour_start_.data();
+  on.colours = colour_start_.size() - 1;
+  return on;
 }
 
 // Whether the last substep's contact list serves this one unchanged: it was built from the same

@@ -892,8 +892,13 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   } else {
     // the contact history's lookup reads last substep's rows
     if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
-    search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
-                 first && c.pair_friction_pass ? &pair_normal_ : nullptr);
+    // use_opencl: the rows found on the device (the same rows; the host's search where the
+    // device cannot, opencl/iterations.h)
+    const bool on_device = c.s.use_opencl &&
+                           open_device().find_neighbours(p_.data(), c.search_radius, n, c.q, neighbors_);
+    if (!on_device)
+      search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
+                   first && c.pair_friction_pass ? &pair_normal_ : nullptr);
     rows_valid_ = false;
     if (first && c.reusable) remember_rows(c.d, c.s, c.search_radius, threads);
   }

@@ -23,6 +23,7 @@ namespace grains {
 namespace opencl {
 class Iterations;
 struct IterationSizes;
+struct SequentialContacts;
 }
 
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
@@ -285,6 +286,9 @@ class GrainsSolver {
   // carried contacts' pre-stabilization moved each grain (3 a grain)
   std::vector<uint32_t> load_of_;
   std::vector<float> carried_move_;
+  std::vector<uint8_t> carried_flag_;  // use_opencl: 1 for a contact with a carried load
+  // seq_ and its blocks and colours as opencl::Iterations takes them
+  opencl::SequentialContacts device_contacts();
   // the warm start's per-contact and per-grain working arrays, kept between substeps
   std::vector<float> warm_factor_, warm_balance_;
   std::vector<gr_float3> warm_normal_, warm_repeat_, warm_external_;

@@ -1,6 +1,8 @@
 // Shared helpers for tests: graphs from inline JSON, temporary folders, the grains and
 // grains-lab binaries.
 #pragma once
+#include <stdlib.h>
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -41,6 +43,23 @@ class Sequence {
 
  private:
   uint32_t h_;
+};
+
+// sets an environment variable for a scope, restoring what was there
+struct ScopedEnv {
+  const char* var;
+  bool had;
+  std::string saved;
+  ScopedEnv(const char* v, const std::string& value) : var(v) {
+    const char* before = getenv(var);
+    had = before != nullptr;
+    if (had) saved = before;
+    setenv(var, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (had) setenv(var, saved.c_str(), 1);
+    else unsetenv(var);
+  }
 };
 
 }  // namespace grains::test

@@ -33,15 +33,15 @@ typedef unsigned long long gr_ulong;
 /* One contact; the host builds them each substep and the device reads the same bytes (56 a
  * contact on both sides: 8-byte key aligned at 16). */
 typedef struct {
-  int i, j;       /* j < 0: collider plane entry e */
+  int i, j; /* j < 0: collider plane entry e */
   gr_uint e;
-  gr_uint moves;  /* bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written */
-  gr_ulong key;   /* who the contact is across substeps (the grains' ids; a plane: its collider) */
-  float k;        /* correction scale (repulsion weight x stiffness fraction; planes 1) */
-  float share;    /* i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest */
-  float mu;       /* friction scale (friction_with_particles or _colliders x the attribute) */
-  float ln;       /* normal correction applied in the substep (m of relative motion) */
-  float lt[3];    /* tangential correction applied in the substep (m), i's side */
+  gr_uint moves; /* bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written */
+  gr_ulong key;  /* who the contact is across substeps (the grains' ids; a plane: its collider) */
+  float k;       /* correction scale (repulsion weight x stiffness fraction; planes 1) */
+  float share;   /* i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest */
+  float mu;      /* friction scale (friction_with_particles or _colliders x the attribute) */
+  float ln;      /* normal correction applied in the substep (m of relative motion) */
+  float lt[3];   /* tangential correction applied in the substep (m), i's side */
 } gr_seq_contact;
 
 /* a[i] += d s */
@@ -73,7 +73,8 @@ GR_INLINE float gr_seq_geometry(const gr_grains* g, const GR_GLOBAL float* x,
 
 /* a grain pair apart at positions x, found without a square root: most of the search's
  * candidates (in a settled packing two of three) never touch in the substep */
-GR_INLINE int gr_seq_apart(const gr_grains* g, const GR_GLOBAL float* x, const GR_GLOBAL gr_seq_contact* q) {
+GR_INLINE int gr_seq_apart(const gr_grains* g, const GR_GLOBAL float* x,
+                           const GR_GLOBAL gr_seq_contact* q) {
   gr_float3 d;
   float reach;
   if (q->j < 0) return 0;
@@ -119,6 +120,32 @@ GR_INLINE void gr_seq_pass(const gr_grains* g, const gr_params* prm, GR_GLOBAL f
   q->lt[1] = lt.y;
   q->lt[2] = lt.z;
   gr_seq_apply(p, q, gr_sub(lt, lt0));
+}
+
+/* pre-stabilization of contact q (Macklin et al. 2014 sec. 4.4; gauss_seidel.cpp says when it
+ * runs and why): the overlap at the start positions x removed from x and from the predicted
+ * positions p alike, without velocity or friction. `carried`, when not null, collects what the
+ * contact moved each grain (a contact that carried a load). Returns the move over i's radius,
+ * the measure the passes stop on. */
+GR_INLINE float gr_seq_stabilize(const gr_grains* g, GR_GLOBAL float* x, GR_GLOBAL float* p,
+                                 GR_GLOBAL float* carried, const GR_GLOBAL gr_seq_contact* q) {
+  gr_float3 nrm, d;
+  float C;
+  if (gr_seq_apart(g, x, q)) return 0.0f;
+  C = gr_seq_geometry(g, x, q, &nrm);
+  if (!(C < 0.0f)) return 0.0f;
+  d = gr_scale(nrm, -q->k * C);
+  if (q->moves & 1u) {
+    gr_seq_move(x, q->i, d, q->share);
+    gr_seq_move(p, q->i, d, q->share);
+    if (carried) gr_seq_move(carried, q->i, d, q->share);
+  }
+  if (q->moves & 2u) {
+    gr_seq_move(x, q->j, d, -(1.0f - q->share));
+    gr_seq_move(p, q->j, d, -(1.0f - q->share));
+    if (carried) gr_seq_move(carried, q->j, d, -(1.0f - q->share));
+  }
+  return -q->k * C / g->radius[q->i];
 }
 
 #endif /* GRAINS_KERNELS_SEQUENTIAL_H */

@@ -136,3 +136,139 @@ __kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
     for (k = block_start[b]; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
   }
 }
+
+/* contact_solver gauss_seidel's pre-stabilization over one colour of blocks, as gr_k_sequential
+ * sweeps them: work-item t sweeps block blocks[first + t] (gr_seq_stabilize) and writes the
+ * largest move it made to most[block]; a contact flagged in carried_flag (null: none) also adds
+ * its moves to carried */
+__kernel void gr_k_stabilize(gr_params prm, GR_GRAINS_ARGS, __global float* x, __global float* p,
+                             __global float* carried, __global const uchar* carried_flag,
+                             __global const gr_seq_contact* seq, __global const gr_uint* block_start,
+                             __global const gr_uint* blocks, int first, int count, gr_uint base,
+                             __global float* most) {
+  const int t = (int)get_global_id(0);
+  gr_uint b, k, e;
+  float largest = 0.0f, moved;
+  if (t >= count) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    b = blocks[first + t];
+    e = block_start[b + 1];
+    for (k = block_start[b]; k < e; ++k) {
+      moved = gr_seq_stabilize(&g, x, p, carried_flag && carried_flag[k] ? carried : 0, seq + (k - base));
+      largest = moved > largest ? moved : largest;
+    }
+    most[b] = largest;
+  }
+}
+
+/* The neighbour rows on the device (kernels/grid.h; opencl/neighbours.cpp launches these in
+ * order): the bounds, the grains counted and placed in their cells, the rows counted, then
+ * filled. Integer atomics only count: a cell's grains may sit in any order, and a row, sorted by
+ * unique keys, does not depend on it. Double precision is the pair test's (engine/pair_test.h);
+ * a device without it builds the rows on the host. */
+#ifdef cl_khr_fp64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#include "grid.h"
+
+/* work-item w of `items`: the smallest and largest finite coordinates and the largest radius of
+ * grains w, w + items, ... into part[7 w ...] (lo xyz, hi xyz, r): the host takes the extremes,
+ * which do not depend on the order they are met in */
+__kernel void gr_k_bounds(__global const float* P, __global const float* radius, int n,
+                          __global float* part) {
+  const int w = (int)get_global_id(0), items = (int)get_global_size(0);
+  float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  float r = -INFINITY;
+  int i, a;
+  for (i = w; i < n; i += items) {
+    for (a = 0; a < 3; ++a) {
+      const float v = P[3 * i + a];
+      if (isfinite(v)) {
+        lo[a] = v < lo[a] ? v : lo[a];
+        hi[a] = v > hi[a] ? v : hi[a];
+      }
+    }
+    r = radius[i] > r ? radius[i] : r;
+  }
+  for (a = 0; a < 3; ++a) part[7 * w + a] = lo[a], part[7 * w + 3 + a] = hi[a];
+  part[7 * w + 6] = r;
+}
+
+/* each grain's cell slot, and the cells' counts (zeroed before) */
+__kernel void gr_k_cell_count(gr_grid grid, __global const float* P, int n, __global gr_uint* key,
+                              __global volatile gr_uint* count) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  key[i] = gr_grid_key_of(&grid, P, i);
+  atomic_inc(&count[key[i]]);
+}
+
+/* each grain into its cell: grains[start[key] ...] in arrival order (cursor zeroed before),
+ * its position and radius at sorted[4 slot ...] */
+__kernel void gr_k_cell_place(__global const gr_uint* key, int n, __global const gr_uint* start,
+                              __global volatile gr_uint* cursor, __global gr_uint* grains,
+                              __global const float* P, __global const float* radius,
+                              __global float* sorted) {
+  const int i = (int)get_global_id(0);
+  gr_uint s;
+  if (i >= n) return;
+  s = start[key[i]] + atomic_inc(&cursor[key[i]]);
+  grains[s] = (gr_uint)i;
+  vstore4((float4)(P[3 * i], P[3 * i + 1], P[3 * i + 2], radius[i]), s, sorted);
+}
+
+/* each grain's row length (gr_grid_row_count) */
+__kernel void gr_k_row_count(gr_grid grid, __global const float* P, __global const float* radius,
+                             __global const gr_uint* start, __global const gr_uint* grains,
+                             __global const float* sorted, int n, __global gr_uint* length) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  length[i] = gr_grid_row_count(&grid, P, radius, start, grains, sorted, i);
+}
+
+/* each grain's row (gr_grid_row_fill) at offsets[i], keys its scratch */
+__kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global const float* radius,
+                            __global const gr_uint* start, __global const gr_uint* grains,
+                            __global const float* sorted, int n, __global const gr_uint* offsets,
+                            __global gr_pair_key_t* keys, __global gr_uint* indices) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  gr_grid_row_fill(&grid, P, radius, start, grains, sorted, i, offsets[i], offsets[i + 1], keys,
+                   indices);
+}
+#endif
+
+/* An exclusive prefix sum of n counts, in place, with the total at [n]: gr_k_scan_blocks sums
+ * each block of `block` counts (a work-item a block), gr_k_scan_sums turns those sums into the
+ * blocks' starts (one work-item), gr_k_scan_apply writes each block's running sums from its
+ * start. Integer sums: the same whatever the schedule. */
+__kernel void gr_k_scan_blocks(__global const gr_uint* x, int n, int block, __global gr_uint* sums,
+                               int blocks) {
+  const int b = (int)get_global_id(0);
+  int k, end;
+  gr_uint total = 0;
+  if (b >= blocks) return;
+  end = min(n, (b + 1) * block);
+  for (k = b * block; k < end; ++k) total += x[k];
+  sums[b] = total;
+}
+
+__kernel void gr_k_scan_sums(__global gr_uint* sums, int blocks) {
+  gr_uint total = 0, v;
+  int b;
+  if (get_global_id(0) != 0) return;
+  for (b = 0; b < blocks; ++b) v = sums[b], sums[b] = total, total += v;
+  sums[blocks] = total;
+}
+
+__kernel void gr_k_scan_apply(__global gr_uint* x, int n, int block, __global const gr_uint* sums,
+                              int blocks) {
+  const int b = (int)get_global_id(0);
+  int k, end;
+  gr_uint total, v;
+  if (b >= blocks) return;
+  total = sums[b];
+  end = min(n, (b + 1) * block);
+  for (k = b * block; k < end; ++k) v = x[k], x[k] = total, total += v;
+  if (b == blocks - 1) x[n] = sums[blocks];
+}

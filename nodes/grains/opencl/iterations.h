@@ -10,9 +10,12 @@
 // same result run to run.
 #pragma once
 #include <cstddef>
+#include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
+#include "engine/neighbors.h"
 #include "nodes/grains/kernels/iterate.h"
 #include "nodes/grains/kernels/sequential.h"
 
@@ -65,6 +68,24 @@ class Iterations {
   // the others' Jacobi group, then the contacts colour by colour, then the pins (g.targetP)
   void run_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
                       const SequentialContacts& s, int iterations);
+
+  // The neighbour rows of the positions P (n x 3, m) and radii `radius` (n, m) on the device
+  // (kernels/grid.h, opencl/neighbours.cpp): q's query scale and max_neighbors, out as
+  // NeighborSearch::find gives it, bit for bit. False when the device cannot (out's contents
+  // are then unspecified): it lacks double precision (cl_khr_fp64), a radius is infinite, or
+  // a buffer would exceed the device's largest.
+  bool find_neighbours(const float* P, const float* radius, size_t n, const NeighborQuery& q,
+                       NeighborList& out);
+
+  // contact_solver gauss_seidel's pre-stabilization (gr_seq_stabilize) of the start positions x
+  // and the predicted p (3 n + 1 floats each, in and out), in the passes' order: pass after pass
+  // while go_on(pass, the pass's largest move) says so, at most `most` passes. carried (3 n
+  // floats, in and out) collects what the contacts flagged in carried_flag (a byte a contact)
+  // moved each grain; both null when none is. s's relax and others are not read.
+  void stabilize_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                            float* x, float* p, float* carried, const uint8_t* carried_flag,
+                            const SequentialContacts& s, int most,
+                            const std::function<bool(int, float)>& go_on);
 
   const std::string& device_name() const;
 

@@ -172,23 +172,6 @@ TEST_CASE("use_opencl: a gauss_seidel substep agrees with the CPU path's within 
   CHECK(worst <= bound);
 }
 
-// sets an environment variable for a scope, restoring what was there
-struct ScopedEnv {
-  const char* var;
-  bool had;
-  std::string saved;
-  ScopedEnv(const char* v, const std::string& value) : var(v) {
-    const char* before = getenv(var);
-    had = before != nullptr;
-    if (had) saved = before;
-    setenv(var, value.c_str(), 1);
-  }
-  ~ScopedEnv() {
-    if (had) setenv(var, saved.c_str(), 1);
-    else unsetenv(var);
-  }
-};
-
 TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give the same bits",
           "[opencl][gauss_seidel]") {
   // One device buffer holds at most CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL: 4 GiB, 77 million
@@ -199,8 +182,8 @@ TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give th
   // 1 MiB (GRAINS_OPENCL_MAX_BUFFER_MIB=1: 18,724 contacts) and without the cap.
   const float r = 0.01f;
   auto drop = [&](bool capped) {
-    std::unique_ptr<ScopedEnv> cap;
-    if (capped) cap = std::make_unique<ScopedEnv>("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
+    std::unique_ptr<test::ScopedEnv> cap;
+    if (capped) cap = std::make_unique<test::ScopedEnv>("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
     test::Scene s;
     s.add_collider(test::ground());
     s.add_jittered_block(40, 16, 16, r);
@@ -226,7 +209,7 @@ TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's la
   // A driver need not refuse a buffer over its CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL 3.1 took one of
   // 4.9 GB with a 4 GiB limit and crashed copying into it): Grains checks. 98,304 grains' positions
   // are 1.1 MiB, over a cap of 1 MiB.
-  ScopedEnv cap("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
+  test::ScopedEnv cap("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
   test::Scene s;
   s.add_collider(test::ground());
   s.add_jittered_block(96, 32, 32, 0.01f);

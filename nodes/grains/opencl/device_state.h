@@ -1,0 +1,180 @@
+// The OpenCL device's state, shared by the files that launch its kernels (iterations.cpp: the
+// passes; neighbours.cpp: the neighbour rows): the context, queue and program, the kernels and
+// the device buffers, which keep their size from call to call.
+#pragma once
+#include <algorithm>
+#include <string>
+#include <vector>
+
+#include "nodes/grains/kernels/grid.h"
+#include "nodes/grains/opencl/cl_program.h"
+#include "nodes/grains/opencl/iterations.h"
+
+namespace grains::opencl {
+
+// the kernels take gr_params by value: plain 4-byte fields, the same layout on both sides
+static_assert(sizeof(gr_params) % 4 == 0, "gr_params holds 4-byte fields only");
+
+inline void check(cl_int status, const char* what) {
+  if (status != CL_SUCCESS)
+    throw std::runtime_error(std::string("OpenCL: ") + what + " failed (" + std::to_string(status) +
+                             ")");
+}
+
+inline std::string mib(size_t bytes) {
+  char text[64];
+  std::snprintf(text, sizeof text, "%.1f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  return text;
+}
+
+// A device buffer grown on demand (never shrunk: the grains' counts vary from substep to substep).
+struct Buffer {
+  cl_mem mem = nullptr;
+  size_t capacity = 0;
+  // `largest`: the most bytes one buffer of the device may hold (Impl::largest)
+  void reserve(cl_context ctx, size_t bytes, size_t largest) {
+    bytes = std::max<size_t>(bytes, 4);
+    if (bytes <= capacity) return;
+    // a driver need not refuse a larger one: PoCL 3.1 took 4.9 GB with a 4 GiB limit and its
+    // copy into it crashed
+    if (bytes > largest)
+      throw std::runtime_error(
+          "use_opencl: the substep needs a device buffer of " + mib(bytes) +
+          ", more than the device's largest, " + mib(largest) +
+          " (CL_DEVICE_MAX_MEM_ALLOC_SIZE or GRAINS_OPENCL_MAX_BUFFER_MIB): "
+          "too many grains for this device; run them on the CPU (use_opencl off)");
+    release();
+    cl_int status = CL_SUCCESS;
+    mem = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, nullptr, &status);
+    check(status, "clCreateBuffer");
+    capacity = bytes;
+  }
+  void release() {
+    if (mem) clReleaseMemObject(mem);
+    mem = nullptr;
+    capacity = 0;
+  }
+};
+
+// the per-grain arrays of gr_grains, in the kernels' argument order (GR_GRAINS_ARGS)
+enum Array {
+  kP,
+  kRadius,
+  kInvMass,
+  kMass,
+  kFriction,
+  kRepulsionWeight,
+  kRepulsionStiffness,
+  kAttractionWeight,
+  kAttractionStiffness,
+  kNbrOffsets,
+  kNbrIndices,
+  kPairSlip,
+  kPlaneOffsets,
+  kPlane,
+  kPlaneSlip,
+  kConOffsets,
+  kConOther,
+  kConPrim,
+  kRestLength,
+  kConstraintWeight,
+  kConstraintStiffness,
+  kArrays
+};
+constexpr cl_uint kScalars = 3;  // uniform_radius, uniform_inv_mass, nbr_unconstrained
+constexpr size_t kGroup = 64;    // work-items a work-group
+constexpr cl_uint kFirstOwn = 1 + kArrays + kScalars;  // after prm, the arrays and the scalars
+
+// one array of gr_grains on the host and how much of it the device reads
+struct HostArray {
+  const void* host;
+  size_t bytes;
+};
+
+struct Iterations::Impl {
+  std::string name;
+  cl_context ctx = nullptr;
+  cl_command_queue queue = nullptr;
+  cl_program program = nullptr;
+  // others: gr_k_iterate again, for gauss_seidel's constraints and clumping (its own arguments)
+  cl_kernel iterate = nullptr, friction = nullptr, pin = nullptr, others = nullptr,
+            sequential = nullptr;
+  Buffer arrays[kArrays];
+  Buffer p, next, scratch, pair_sum, collider_sum, collider_dx, friction_dx;
+  Buffer target, target_weight, target_stiffness;  // pins
+  // gauss_seidel's contacts in parts of whole blocks, each within the largest buffer: part k
+  // holds blocks [part_block[k], part_block[k + 1])
+  std::vector<Buffer> seq;
+  std::vector<size_t> part_block;
+  Buffer block_start, colour_blocks;
+  // pre-stabilization's start positions, what carried contacts moved, their flags, and the
+  // largest move of each block in a pass
+  Buffer stable, carried, carried_flag, block_most;
+  cl_kernel stabilize = nullptr;
+  // the most bytes one buffer may hold: the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE, or less
+  // when GRAINS_OPENCL_MAX_BUFFER_MIB says so
+  size_t largest = 0;
+  // the neighbour rows (neighbours.cpp): their kernels exist when the device has double
+  // precision (the pair test's), else the host finds the rows
+  cl_kernel bounds = nullptr, cell_count = nullptr, cell_place = nullptr, row_count = nullptr,
+            row_fill = nullptr, scan_blocks = nullptr, scan_sums = nullptr, scan_apply = nullptr;
+  Buffer nb_P, nb_radius, nb_part, nb_key, nb_count, nb_cursor, nb_grains, nb_sorted, nb_offsets,
+      nb_keys, nb_indices, nb_sums;
+
+  ~Impl() {
+    for (Buffer& b : arrays) b.release();
+    for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
+                      &target, &target_weight, &target_stiffness, &block_start, &colour_blocks,
+                      &stable, &carried, &carried_flag, &block_most})
+      b->release();
+    for (Buffer& b : seq) b.release();
+    for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
+                      &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums})
+      b->release();
+    for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, bounds, cell_count,
+                        cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
+      if (k) clReleaseKernel(k);
+    if (program) clReleaseProgram(program);
+    if (queue) clReleaseCommandQueue(queue);
+    if (ctx) clReleaseContext(ctx);
+  }
+
+  // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
+  void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
+    if (!host) return;
+    b.reserve(ctx, std::max(bytes, device_bytes), largest);
+    if (bytes > 0)
+      check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
+            "clEnqueueWriteBuffer");
+  }
+  void download(Buffer& b, void* host, size_t bytes) {
+    if (!host || bytes == 0) return;
+    check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, 0, bytes, host, 0, nullptr, nullptr),
+          "clEnqueueReadBuffer");
+  }
+
+  // g's arrays (grain_arrays, into a) to `arrays` and the positions p to `p`, once a call;
+  // `next` made room for the passes that swap with p
+  void upload_grains(const gr_grains& g, const IterationSizes& size, const float* positions,
+                     HostArray* a);
+  // kernel k's first arguments: prm, the arrays `a` holds (null where it has none) and g's scalars
+  void set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a);
+  // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x
+  void set_pins(const gr_grains& g, const gr_params& prm, size_t n);
+  void project_pins(Buffer* x, size_t global);
+  // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
+  void upload_contacts(const SequentialContacts& s);
+  // kernel k's arguments that sweep_colour sets for each part: its contacts, the colour's first
+  // block there (in s.colour_blocks), their count, the part's first contact
+  struct PartArgs {
+    cl_uint seq, first, count, base;
+  };
+  // launches k (a work-item a block) over each part of colour c's blocks
+  void sweep_colour(cl_kernel k, PartArgs at, const SequentialContacts& s, size_t c);
+  // the neighbour kernels, when the program has them (a device with cl_khr_fp64)
+  void open_neighbours();
+  // an exclusive prefix sum of x's n counts in place, the total at x[n] (x holds n + 1)
+  void scan(Buffer& x, size_t n);
+};
+
+}  // namespace grains::opencl

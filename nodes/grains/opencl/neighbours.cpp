@@ -1,0 +1,216 @@
+// The neighbour rows on an OpenCL device (Iterations::find_neighbours; the kernels and why they
+// give the CPU's rows: kernels/grid.h and grains.cl). The host reads back the bounding box (7
+// floats a work-item of gr_k_bounds) to lay out the grid, and the row offsets to size the rows.
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "nodes/grains/opencl/device_state.h"
+
+namespace grains::opencl {
+namespace {
+
+static_assert(sizeof(gr_grid) == 88,
+              "gr_grid: the OpenCL C layout (8-byte fields, then two 4-byte)");
+
+constexpr int64_t kCellMax = (int64_t(1) << 31) - 2;  // the most cells along an axis
+constexpr size_t kBoundsItems = 16 * kGroup;          // gr_k_bounds' work-items
+constexpr size_t kScanBlock = 1024;                   // counts a work-item of the prefix sum sums
+
+size_t whole_groups(size_t items) {
+  return (std::max<size_t>(items, 1) + kGroup - 1) / kGroup * kGroup;
+}
+
+void launch(cl_command_queue queue, cl_kernel k, size_t items) {
+  const size_t global = whole_groups(items), local = kGroup;
+  check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+        "clEnqueueNDRangeKernel");
+}
+
+template <class T>
+void arg(cl_kernel k, cl_uint index, const T& value) {
+  check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
+}
+void arg(cl_kernel k, cl_uint index, const Buffer& b) {
+  arg(k, index, b.mem);
+}
+
+// The grid over the box [lo, hi] of n grains with pair distances below t_max (kernels/grid.h):
+// every axis dense when the box has at most 8 cells a grain, else wrapped on powers of two of at
+// least 4 cells until about 4 cells a grain, the longest axis first.
+gr_grid lay_out(const float lo[3], const float hi[3], float t_max, size_t n,
+                const NeighborQuery& q) {
+  gr_grid g{};
+  const double h = double(t_max) * (1.0 + 1e-5);
+  g.inv_h = 1.0 / h;
+  g.qs = q.query_scale;
+  g.max_neighbors = q.max_neighbors;
+  double cells = 1;
+  for (int a = 0; a < 3; ++a) {
+    g.lo[a] = lo[a];
+    const double e = std::floor((double(hi[a]) - double(lo[a])) * g.inv_h) + 1.0;
+    g.ext[a] = e >= double(kCellMax) ? kCellMax : std::max<int64_t>(1, int64_t(e));
+    cells *= double(g.ext[a]);
+  }
+  if (cells <= 8.0 * double(n) + 64.0) {
+    for (int a = 0; a < 3; ++a) g.dim[a] = g.ext[a];
+    return g;
+  }
+  int64_t target = 64;
+  while (target < int64_t(4 * n)) target *= 2;
+  for (int a = 0; a < 3; ++a) g.dim[a] = std::min<int64_t>(g.ext[a], 4);
+  while (g.dim[0] * g.dim[1] * g.dim[2] < target) {
+    int best = -1;
+    double ratio = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      const double r = double(g.ext[a]) / double(g.dim[a]);
+      if (g.dim[a] < g.ext[a] && r > ratio) best = a, ratio = r;
+    }
+    if (best < 0) break;
+    g.dim[best] = g.dim[best] * 2 >= g.ext[best] ? g.ext[best] : g.dim[best] * 2;
+  }
+  return g;
+}
+
+}  // namespace
+
+void Iterations::Impl::open_neighbours() {
+  if (scan_blocks) return;
+  cl_int status = CL_SUCCESS;
+  auto make = [&](const char* name) {
+    cl_kernel k = clCreateKernel(program, name, &status);
+    check(status, name);
+    return k;
+  };
+  scan_blocks = make("gr_k_scan_blocks");
+  scan_sums = make("gr_k_scan_sums");
+  scan_apply = make("gr_k_scan_apply");
+  // the program has the grid's kernels only where cl_khr_fp64 is defined (grains.cl)
+  bounds = clCreateKernel(program, "gr_k_bounds", &status);
+  if (status == CL_INVALID_KERNEL_NAME) {
+    bounds = nullptr;
+    return;
+  }
+  check(status, "gr_k_bounds");
+  cell_count = make("gr_k_cell_count");
+  cell_place = make("gr_k_cell_place");
+  row_count = make("gr_k_row_count");
+  row_fill = make("gr_k_row_fill");
+}
+
+void Iterations::Impl::scan(Buffer& x, size_t n) {
+  const size_t blocks = (n + kScanBlock - 1) / kScanBlock;
+  if (blocks == 0) {
+    const gr_uint zero = 0;
+    check(clEnqueueWriteBuffer(queue, x.mem, CL_FALSE, 0, sizeof zero, &zero, 0, nullptr, nullptr),
+          "clEnqueueWriteBuffer");
+    return;
+  }
+  nb_sums.reserve(ctx, (blocks + 1) * sizeof(gr_uint), largest);
+  const int count = static_cast<int>(n), block = static_cast<int>(kScanBlock),
+            nblocks = static_cast<int>(blocks);
+  arg(scan_blocks, 0, x), arg(scan_blocks, 1, count), arg(scan_blocks, 2, block);
+  arg(scan_blocks, 3, nb_sums), arg(scan_blocks, 4, nblocks);
+  launch(queue, scan_blocks, blocks);
+  arg(scan_sums, 0, nb_sums), arg(scan_sums, 1, nblocks);
+  launch(queue, scan_sums, 1);
+  arg(scan_apply, 0, x), arg(scan_apply, 1, count), arg(scan_apply, 2, block);
+  arg(scan_apply, 3, nb_sums), arg(scan_apply, 4, nblocks);
+  launch(queue, scan_apply, blocks);
+}
+
+bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
+                                 const NeighborQuery& q, NeighborList& out) {
+  Impl& m = *impl_;
+  const size_t f = sizeof(float), u = sizeof(gr_uint);
+  if (n >= size_t(std::numeric_limits<int>::max()) / 3) return false;
+  m.open_neighbours();
+  if (!m.bounds) return false;
+  if (n == 0) {
+    out.offsets.assign(1, 0);
+    out.indices.clear();
+    return true;
+  }
+  // a buffer over the device's largest: the host finds the rows (the same rows) rather than
+  // refuse the substep; the entries' keys are checked once their number is known
+  if (4 * n * f > m.largest) return false;
+  const int count = static_cast<int>(n);
+  m.upload(m.nb_P, P, 3 * n * f);
+  m.upload(m.nb_radius, radius, n * f);
+
+  // the finite positions' box and the largest radius
+  m.nb_part.reserve(m.ctx, 7 * kBoundsItems * f, m.largest);
+  arg(m.bounds, 0, m.nb_P), arg(m.bounds, 1, m.nb_radius), arg(m.bounds, 2, count),
+      arg(m.bounds, 3, m.nb_part);
+  launch(m.queue, m.bounds, kBoundsItems);
+  std::vector<float> part(7 * kBoundsItems);
+  m.download(m.nb_part, part.data(), part.size() * f);
+  const float inf = std::numeric_limits<float>::infinity();
+  float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf}, r_max = -inf;
+  for (size_t w = 0; w < kBoundsItems; ++w) {
+    for (int a = 0; a < 3; ++a)
+      lo[a] = std::min(lo[a], part[7 * w + a]), hi[a] = std::max(hi[a], part[7 * w + 3 + a]);
+    if (part[7 * w + 6] > r_max) r_max = part[7 * w + 6];
+  }
+  for (int a = 0; a < 3; ++a)
+    if (!(lo[a] <= hi[a])) lo[a] = hi[a] = 0.0f;  // no finite coordinate
+  // no pair's t = qs (ri + rj) exceeds the largest one's
+  const float t_max = q.query_scale * (r_max + r_max);
+  if (!(t_max > 0.0f)) {  // no pair passes the test
+    out.offsets.assign(n + 1, 0);
+    out.indices.clear();
+    return true;
+  }
+  if (!std::isfinite(t_max)) return false;
+  const gr_grid grid = lay_out(lo, hi, t_max, n, q);
+  const size_t cells = size_t(grid.dim[0] * grid.dim[1] * grid.dim[2]);
+  if ((cells + 1) * u > m.largest) return false;
+
+  // the grains in their cells
+  const gr_uint zero = 0;
+  m.nb_key.reserve(m.ctx, n * u, m.largest);
+  m.nb_count.reserve(m.ctx, (cells + 1) * u, m.largest);
+  m.nb_cursor.reserve(m.ctx, cells * u, m.largest);
+  m.nb_grains.reserve(m.ctx, n * u, m.largest);
+  m.nb_sorted.reserve(m.ctx, 4 * n * f, m.largest);
+  check(clEnqueueFillBuffer(m.queue, m.nb_count.mem, &zero, u, 0, (cells + 1) * u, 0, nullptr,
+                            nullptr),
+        "clEnqueueFillBuffer");
+  check(clEnqueueFillBuffer(m.queue, m.nb_cursor.mem, &zero, u, 0, cells * u, 0, nullptr, nullptr),
+        "clEnqueueFillBuffer");
+  arg(m.cell_count, 0, grid), arg(m.cell_count, 1, m.nb_P), arg(m.cell_count, 2, count);
+  arg(m.cell_count, 3, m.nb_key), arg(m.cell_count, 4, m.nb_count);
+  launch(m.queue, m.cell_count, n);
+  m.scan(m.nb_count, cells);
+  arg(m.cell_place, 0, m.nb_key), arg(m.cell_place, 1, count), arg(m.cell_place, 2, m.nb_count);
+  arg(m.cell_place, 3, m.nb_cursor), arg(m.cell_place, 4, m.nb_grains);
+  arg(m.cell_place, 5, m.nb_P), arg(m.cell_place, 6, m.nb_radius),
+      arg(m.cell_place, 7, m.nb_sorted);
+  launch(m.queue, m.cell_place, n);
+
+  // the rows: their lengths, offsets, then the rows themselves
+  m.nb_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  for (cl_kernel k : {m.row_count, m.row_fill}) {
+    arg(k, 0, grid), arg(k, 1, m.nb_P), arg(k, 2, m.nb_radius), arg(k, 3, m.nb_count);
+    arg(k, 4, m.nb_grains), arg(k, 5, m.nb_sorted), arg(k, 6, count), arg(k, 7, m.nb_offsets);
+  }
+  launch(m.queue, m.row_count, n);
+  m.scan(m.nb_offsets, n);
+  out.offsets.resize(n + 1);
+  m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
+  const size_t entries = out.offsets[n];
+  out.indices.resize(entries);
+  if (entries == 0) return true;
+  if (entries * sizeof(gr_pair_key_t) > m.largest) {
+    out.offsets.clear();
+    return false;
+  }
+  m.nb_keys.reserve(m.ctx, entries * sizeof(gr_pair_key_t), m.largest);
+  m.nb_indices.reserve(m.ctx, entries * u, m.largest);
+  arg(m.row_fill, 8, m.nb_keys), arg(m.row_fill, 9, m.nb_indices);
+  launch(m.queue, m.row_fill, n);
+  m.download(m.nb_indices, out.indices.data(), entries * u);
+  return true;
+}
+
+}  // namespace grains::opencl

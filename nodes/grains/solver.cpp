@@ -650,7 +650,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   // removed from the start and predicted positions alike, without velocity
   if (s.pre_stabilization && s.contact_solver != kContactGaussSeidel &&
       ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
-    pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads);
+    pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads,
+                  s.use_opencl ? &c : nullptr);
     g.P = P_stable_.data();
   }
 
@@ -1199,7 +1200,7 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
 // predicted positions p_ move by the same amounts, so the overlaps the substep began with are
 // removed without becoming velocity. `pairs`: grain pairs take part (else collider planes only).
 void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool pairs,
-                                 int iterations, int threads) {
+                                 int iterations, int threads, const SubstepContext* device) {
   const size_t n = n_;
   const long ln = static_cast<long>(n);
   gr_params ps = prm;
@@ -1214,7 +1215,14 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
   // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
   // passes in most substeps, most of the substep's work, all of it without friction.
   const int stabilize_max = std::min(kStabilizeIterations, iterations);
-  for (int k = 0; k < stabilize_max; ++k) {
+  if (device) {
+    // the same passes on the device (opencl/iterations.h)
+    opencl::IterationSizes size = device_sizes(*device);
+    if (!pairs) size.pair_entries = 0;
+    open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max,
+                            [](int, float moved) { return moved > kStabilizeTolerance; });
+  }
+  for (int k = 0; k < stabilize_max && !device; ++k) {
     const float* x = P_stable_.data();
     float* next = p_stable_next_.data();
     float moved = 0;

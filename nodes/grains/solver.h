@@ -172,9 +172,11 @@ class GrainsSolver {
   int32_t previous_index(int32_t id) const;
 
   // the substep's stages (solver.cpp)
+  struct SubstepContext;
   void build_shapes(const GrainsData& d);
+  // device: the substep's context when its passes run on the OpenCL device (use_opencl)
   void pre_stabilize(const gr_grains& g, const gr_params& prm, bool pairs, int iterations,
-                     int threads);
+                     int threads, const SubstepContext* device);
   void write_back(GrainsData& d, const GrainsSettings& s, const gr_grains& g, const gr_params& prm,
                   const ColliderState* colliders, size_t collider_count, const Vec3& origin,
                   bool impacts, int threads);
@@ -184,7 +186,6 @@ class GrainsSolver {
   // sums and search settings the substep opens with, the neighbour rows and collider planes
   // (first: at the substep's start; otherwise a rebuild during the iterations, carrying what they
   // accumulated), the iterations with their friction passes and pins
-  struct SubstepContext;
   void bind_inputs(SubstepContext& c);
   void predict(SubstepContext& c);
   void open_sums(SubstepContext& c);

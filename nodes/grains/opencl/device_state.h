@@ -111,6 +111,9 @@ struct Iterations::Impl {
   // largest move of each block in a pass
   Buffer stable, carried, carried_flag, block_most;
   cl_kernel stabilize = nullptr;
+  // the Jacobi path's: a pass, and the largest move's parts
+  cl_kernel stabilize_grains = nullptr, largest_part = nullptr;
+  Buffer moved, moved_part;
   // the most bytes one buffer may hold: the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE, or less
   // when GRAINS_OPENCL_MAX_BUFFER_MIB says so
   size_t largest = 0;
@@ -125,13 +128,14 @@ struct Iterations::Impl {
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
                       &target, &target_weight, &target_stiffness, &block_start, &colour_blocks,
-                      &stable, &carried, &carried_flag, &block_most})
+                      &stable, &carried, &carried_flag, &block_most, &moved, &moved_part})
       b->release();
     for (Buffer& b : seq) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums})
       b->release();
-    for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, bounds, cell_count,
+    for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, stabilize_grains,
+                        largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);

@@ -105,6 +105,31 @@ __kernel void gr_k_friction(gr_params prm, GR_GRAINS_ARGS, __global const float*
   gr_store3(next, i, gr_friction_pass(&g, &prm, p, &acc, i));
 }
 
+/* one pass of the Jacobi path's pre-stabilization: next = gr_stabilize(x), and each grain's
+ * move over its radius in moved (the host stops on the largest, gr_k_largest) */
+__kernel void gr_k_stabilize_grains(gr_params prm, GR_GRAINS_ARGS, __global const float* x,
+                                    __global float* next, __global float* moved, int n) {
+  const int i = (int)get_global_id(0);
+  gr_float3 y;
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    y = gr_stabilize(&g, &prm, x, i);
+    moved[i] = gr_length(gr_sub(y, gr_load3(x, i))) / radius[i];
+    gr_store3(next, i, y);
+  }
+}
+
+/* work-item w of `items`: the largest of v[w], v[w + items], ... into part[w] (the host takes
+ * the largest of the parts: a maximum does not depend on the order it is taken in) */
+__kernel void gr_k_largest(__global const float* v, int n, __global float* part) {
+  const int w = (int)get_global_id(0), items = (int)get_global_size(0);
+  float most = 0.0f;
+  int i;
+  for (i = w; i < n; i += items) most = v[i] > most ? v[i] : most;
+  part[w] = most;
+}
+
 /* pins, once an iteration and last (kernels/pin.h): each grain moves only itself, in place */
 __kernel void gr_k_pin(gr_params prm, __global const float* targetP,
                        __global const float* targetweight, __global const float* targetstiffness,

@@ -314,6 +314,53 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm,
   }
 }
 
+void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                           float* x, int most, const std::function<bool(int, float)>& go_on) {
+  Impl& m = *impl_;
+  const size_t n = size.n;
+  if (n == 0 || most <= 0) return;
+  const size_t f = sizeof(float);
+  constexpr size_t kParts = 16 * kGroup;  // gr_k_largest's work-items
+  if (!m.stabilize_grains) {
+    cl_int status = CL_SUCCESS;
+    m.stabilize_grains = clCreateKernel(m.program, "gr_k_stabilize_grains", &status);
+    check(status, "clCreateKernel(gr_k_stabilize_grains)");
+    m.largest_part = clCreateKernel(m.program, "gr_k_largest", &status);
+    check(status, "clCreateKernel(gr_k_largest)");
+  }
+  HostArray inputs[kArrays];
+  m.upload_grains(g, size, x, inputs);  // x to m.p; m.next made room for
+  m.moved.reserve(m.ctx, n * f, m.largest);
+  m.moved_part.reserve(m.ctx, kParts * f, m.largest);
+  const int count = static_cast<int>(n);
+  cl_kernel k = m.stabilize_grains;
+  m.set_grains(k, prm, g, inputs);
+  set_buffer(k, kFirstOwn + 2, &m.moved);
+  check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
+  set_buffer(m.largest_part, 0, &m.moved);
+  check(clSetKernelArg(m.largest_part, 1, sizeof(int), &count), "clSetKernelArg");
+  set_buffer(m.largest_part, 2, &m.moved_part);
+  const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup, parts = kParts;
+  std::vector<float> part(kParts);
+  Buffer* from = &m.p;
+  Buffer* to = &m.next;
+  for (int pass = 0; pass < most; ++pass) {
+    set_buffer(k, kFirstOwn, from);
+    set_buffer(k, kFirstOwn + 1, to);
+    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+    std::swap(from, to);
+    check(clEnqueueNDRangeKernel(m.queue, m.largest_part, 1, nullptr, &parts, &local, 0, nullptr,
+                                 nullptr),
+          "clEnqueueNDRangeKernel");
+    m.download(m.moved_part, part.data(), kParts * f);
+    float moved = 0.0f;
+    for (const float v : part) moved = std::max(moved, v);
+    if (!go_on(pass, moved)) break;
+  }
+  m.download(*from, x, 3 * n * f);
+}
+
 void Iterations::stabilize_sequential(const gr_grains& g, const gr_params& prm,
                                       const IterationSizes& size, float* x, float* p,
                                       float* carried, const uint8_t* carried_flag,

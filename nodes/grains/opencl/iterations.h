@@ -77,6 +77,12 @@ class Iterations {
   bool find_neighbours(const float* P, const float* radius, size_t n, const NeighborQuery& q,
                        NeighborList& out);
 
+  // the Jacobi path's pre-stabilization (gr_stabilize) of the start positions x (3 n + 1
+  // floats, in and out): pass after pass while go_on(pass, the largest move over a radius)
+  // says so, at most `most` passes
+  void stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* x,
+                 int most, const std::function<bool(int, float)>& go_on);
+
   // contact_solver gauss_seidel's pre-stabilization (gr_seq_stabilize) of the start positions x
   // and the predicted p (3 n + 1 floats each, in and out), in the passes' order: pass after pass
   // while go_on(pass, the pass's largest move) says so, at most `most` passes. carried (3 n

@@ -232,7 +232,9 @@ void Iterations::Impl::upload_contacts(const SequentialContacts& s) {
 
 void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialContacts& s,
                                     size_t c) {
-  const size_t local = kGroup;
+  // a work-group a block: a device spreads work-groups over its compute units (PoCL runs a
+  // work-group on one core), and a colour has few blocks
+  const size_t local = 1;
   for (size_t part = 0; part + 1 < part_block.size(); ++part) {
     // the colour's blocks (ascending) that lie in this part; blocks of one colour touch no
     // common grain, so sweeping them part by part gives what one launch would
@@ -249,8 +251,7 @@ void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialCo
     check(clSetKernelArg(k, at.first, sizeof(int), &first), "clSetKernelArg");
     check(clSetKernelArg(k, at.count, sizeof(int), &count), "clSetKernelArg");
     check(clSetKernelArg(k, at.base, sizeof(gr_uint), &base), "clSetKernelArg");
-    // a work-item a block (a block is 1,024 grains: a colour has few), in whole groups
-    const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
+    const size_t items = static_cast<size_t>(count);
     check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &items, &local, 0, nullptr, nullptr),
           "clEnqueueNDRangeKernel");
   }

@@ -6,23 +6,13 @@
 #include <vector>
 
 #include "engine/neighbors.h"
+#include "tests/support/cloud.h"
 
 using namespace grains;
+using test::Cloud;
+using test::unit;
 
 namespace {
-
-// Uniform float in [0, 1) from the raw generator output (no std distribution: same on every
-// standard library).
-float unit(std::mt19937& rng) { return float(rng() >> 8) * (1.0f / 16777216.0f); }
-
-struct Cloud {
-  std::vector<float> P, r;
-  size_t size() const { return r.size(); }
-  void add(float x, float y, float z, float radius) {
-    P.insert(P.end(), {x, y, z});
-    r.push_back(radius);
-  }
-};
 
 // n points uniform in a cube of side `side`, one radius.
 Cloud uniform_cloud(size_t n, float side, float radius, uint32_t seed) {

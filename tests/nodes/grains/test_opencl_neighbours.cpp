@@ -5,6 +5,7 @@
 // device's grid wrap, a flat layer, mixed radii, grains on one spot, positions and radii that
 // are not finite, and every max_neighbors cut.
 #include <catch2/catch.hpp>
+
 #include <cmath>
 #include <limits>
 #include <random>
@@ -12,24 +13,14 @@
 
 #include "engine/neighbors.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "tests/support/cloud.h"
 #include "tests/support/support.h"
 
 using namespace grains;
+using test::Cloud;
+using test::unit;
 
 namespace {
-
-float unit(std::mt19937& rng) {
-  return float(rng() >> 8) * (1.0f / 16777216.0f);
-}
-
-struct Cloud {
-  std::vector<float> P, r;
-  size_t size() const { return r.size(); }
-  void add(float x, float y, float z, float radius) {
-    P.insert(P.end(), {x, y, z});
-    r.push_back(radius);
-  }
-};
 
 // n grains uniform in a box of sides sx, sy, sz, radii log-uniform in [rmin, rmax]
 Cloud cloud(size_t n, float sx, float sy, float sz, float rmin, float rmax, uint32_t seed) {

@@ -60,6 +60,7 @@
 #include "nodes/grains/kernels/collider.h"
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/mass_shock.h"
+#include "nodes/grains/kernels/warm.h"
 #include "nodes/grains/opencl/iterations.h"
 #include "nodes/grains/substep_context.h"
 
@@ -67,10 +68,6 @@ namespace grains {
 namespace {
 
 constexpr uint32_t kPlaneKey = 0x80000000u;
-// the most a warm start may throw a grain off balance beyond its external step, in radii, and
-// the most of that it may lift the grain against it
-constexpr float kWarmSlack = 0.1f;
-constexpr float kWarmLift = 0.05f;
 // pre-stabilization stops when its largest move has not fallen at all over 4 passes: grains
 // wedged between sleepers repeated 0.0028 r for 50 passes; converging passes fall, if slowly
 // (1% a pass in the DEM collapse; a column of 100 grains stopped at 0.5% over 4 passes bounced
@@ -86,9 +83,6 @@ constexpr uint32_t kBlockGrains = 1024;
 // microseconds, about what the threads' meeting at the end of each colour costs (and a scene
 // that small is one or two blocks)
 constexpr size_t kParallelContacts = 1024;
-
-// the component of a along the unit n removed
-inline gr_float3 tangential(gr_float3 a, gr_float3 n) { return gr_madd(a, n, -gr_dot(a, n)); }
 
 }  // namespace
 
@@ -202,7 +196,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     return gr_seq_geometry(&g, x, &q, nrm);
   };
   auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
-  auto apply = [&](const SeqContact& q, gr_float3 d) { gr_seq_apply(p, &q, d); };
   // body(q) over every contact, colour by colour, block by block, a colour's blocks shared out
   // among the threads when there are enough contacts; returns the largest body returned
   const bool parallel = c.threads > 1 && seq_.size() >= kParallelContacts;
@@ -232,19 +225,33 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
 
   // each contact's carried load (the warm start's), found once: seq_loads_ index + 1, 0 for none;
   // with a kept list the contact holds its own (kLoadInPlace)
+  // The carried load, scaled by (dt / dt_last)^2, waits in the contact's accumulators for the
+  // warm start (pre-stabilization does not read them), which keeps its tangential part across
+  // the contact's normal once the pre-stabilized positions are known (gr_warm_open)
   std::vector<uint32_t>& load_of = load_of_;
+  const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
   if (warm) {
     load_of.resize(seq_.size());
     const long lm = static_cast<long>(seq_.size());
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
     for (long k = 0; k < lm; ++k) {
-      const SeqContact& q = seq_[k];
+      SeqContact& q = seq_[k];
+      gr_float3 t;
       if (kept) {
         load_of[k] = q.ln > 0.0f ? kLoadInPlace : 0u;
+        if (!load_of[k]) continue;
+        q.ln *= scale;
+        t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), scale);
       } else {
         const SeqLoad* it = find_load(q.key);
         load_of[k] = it ? static_cast<uint32_t>(it - seq_loads_.data()) + 1u : 0u;
+        if (!it) continue;
+        // stored on the grain of the lower id
+        const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
+        q.ln = it->ln * scale;
+        t = gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale);
       }
+      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
     }
   }
 
@@ -260,6 +267,28 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // grains 0.083 r after 64 passes and needed 542, and what the cap left became velocity
   // (overlap / dt, 2.5 m/s at 256 substeps a frame), which kept error control at 256 substeps
   // for two frames and ran the column out 0.93 L0 instead of 0.86
+  const bool device = c.s.use_opencl;
+  // with use_opencl pre-stabilization, the velocity it takes back, the warm start and the passes
+  // run on the device in one call, below (opencl/iterations.h: the same steps in the same order)
+  opencl::SequentialSolve on_device;
+  std::vector<uint8_t>& loaded = carried_flag_;  // a byte a contact: 1 when it carries a load
+  if (device && warm) {
+    loaded.resize(seq_.size());
+    for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;
+    on_device.loaded = loaded.data();
+  }
+  // the largest move of the last kStallPasses passes: sweeps whose largest move no longer
+  // falls over kStallPasses passes are going round in a circle, grains wedged between fixed
+  // ones (sleepers) whose overlaps no placement of them removes
+  float recent[kStallPasses] = {};
+  // whether another pass follows one whose largest move was `moved`
+  auto go_on = [&](int pass, float moved) {
+    ++stabilize_passes_;
+    if (!(moved > kStabilizeTolerance)) return false;
+    if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) return false;
+    recent[pass % kStallPasses] = moved;
+    return true;
+  };
   if (c.s.pre_stabilization) {
     const int most_passes = warm ? kStabilizeIterations : kColdStabilizeIterations;
     P_stable_.assign(P, P + 3 * n);
@@ -269,27 +298,15 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     const bool made = warm && !c.s.keep_velocity;
     if (made) carried_move_.assign(3 * n, 0.0f);
     float* moved_by_carried = carried_move_.data();
-    // the largest move of the last kStallPasses passes: sweeps whose largest move no longer
-    // falls over kStallPasses passes are going round in a circle, grains wedged between fixed
-    // ones (sleepers) whose overlaps no placement of them removes
-    float recent[kStallPasses] = {};
-    // whether another pass follows one whose largest move was `moved`
-    auto go_on = [&](int pass, float moved) {
-      if (!(moved > kStabilizeTolerance)) return false;
-      if (pass >= kStallPasses && moved >= recent[pass % kStallPasses]) return false;
-      recent[pass % kStallPasses] = moved;
-      return true;
-    };
-    if (c.s.use_opencl) {
-      // on the device, the same passes in the same order (opencl/iterations.h)
-      opencl::SequentialContacts on = device_contacts();
-      std::vector<uint8_t>& flag = carried_flag_;
+    if (device) {
+      on_device.most = most_passes;
+      on_device.go_on = go_on;
+      on_device.x = x;
       if (made) {
-        flag.resize(seq_.size());
-        for (size_t k = 0; k < seq_.size(); ++k) flag[k] = load_of[k] != 0u;
+        on_device.carried = moved_by_carried;
+        on_device.v = c.d.v;
+        on_device.inv_last = 1.0f / seq_dt_;
       }
-      open_device().stabilize_sequential(g, prm, device_sizes(c), x, p, made ? moved_by_carried : nullptr,
-                                         made ? flag.data() : nullptr, on, most_passes, go_on);
     } else {
       auto stabilize = [&](const SeqContact& q) -> float {
         const bool carried = made && load_of[static_cast<size_t>(&q - seq_.data())] != 0u;
@@ -310,101 +327,52 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // Only carried contacts: a new contact's overlap was made by emission or by a neighbour's
     // fall, and a grain of a falling stream pushed off an emitted one lost its share of the
     // common fall sideways (grains 2.4 m/s off the DEM pile's stream).
-    if (made) {
+    if (made && !device) {
       float* v = c.d.v;
       const float inv_last = 1.0f / seq_dt_;
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-      for (int i = 0; i < ni; ++i) {
-        if (!(g.inv_mass[i] > 0.0f)) continue;
-        const gr_float3 m = gr_load3(moved_by_carried, i);
-        const float length = gr_length(m);
-        if (!(length > 0.0f)) continue;
-        const gr_float3 u = gr_scale(m, 1.0f / length);
-        const gr_float3 vi = gr_load3(v, i);
-        const float against = gr_dot(vi, u);
-        if (!(against < 0.0f)) continue;
-        const float cut = std::max(against, -length * inv_last);  // <= 0
-        gr_store3(v, i, gr_madd(vi, u, -cut));
-        gr_store3(p, i, gr_madd(gr_load3(p, i), u, -cut * dt));
-      }
+      for (int i = 0; i < ni; ++i) gr_warm_take_back(&g, v, p, moved_by_carried, inv_last, dt, i);
     }
     c.g.P = P = x;
   }
 
-  // the warm start
-  if (warm) {
-    const float scale = (dt / seq_dt_) * (dt / seq_dt_);
+  // the warm start (kernels/warm.h)
+  if (warm && !device) {
     const size_t m = seq_.size();
-    const gr_float3 zero = gr_make3(0.0f, 0.0f, 0.0f);
     // each contact's repeated load waits in its own accumulators (q.ln, q.lt), which the
     // passes start from, until the last sweep below scales it by the contact's factor
     std::vector<float>& factor = warm_factor_;
-    std::vector<gr_float3>& normal = warm_normal_;
+    std::vector<float>& normal = warm_normal_;
     factor.assign(m, 0.0f);
-    normal.assign(m, zero);
+    normal.assign(3 * m, 0.0f);
     const long lm = static_cast<long>(m);
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-    for (long k = 0; k < lm; ++k) {
-      SeqContact& q = seq_[k];
-      gr_float3 t;
-      if (!load_of[k]) continue;
-      if (kept) {
-        q.ln *= scale;
-        t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), scale);
-      } else {
-        const SeqLoad* it = &seq_loads_[load_of[k] - 1u];
-        // stored on the grain of the lower id
-        const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
-        q.ln = it->ln * scale;
-        t = gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale);
-      }
-      gr_float3& nrm = normal[k];
-      geometry(q, &nrm);
-      t = tangential(t, nrm);
-      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
-      factor[k] = q.ln > 0.0f ? 1.0f : 0.0f;
-    }
+    for (long k = 0; k < lm; ++k)
+      if (load_of[k]) factor[k] = gr_warm_open(&g, p, &seq_[k], &normal[3 * k]);
     // what the loads, each scaled by its factor, give every moving grain (D), summed in the
     // sweep's order (the same for any thread count)
-    std::vector<gr_float3>& repeat = warm_repeat_;
+    std::vector<float>& repeat = warm_repeat_;
     auto sum_repeat = [&] {
-      repeat.assign(n, zero);
+      repeat.assign(3 * n, 0.0f);
       sweep([&](const SeqContact& q) -> float {
         const size_t k = static_cast<size_t>(&q - seq_.data());
-        if (!(factor[k] > 0.0f)) return 0.0f;
-        const gr_float3 d = gr_scale(
-            gr_add(gr_scale(normal[k], q.ln), gr_make3(q.lt[0], q.lt[1], q.lt[2])), factor[k]);
-        if (q.moves & 1u) repeat[q.i] = gr_add(repeat[q.i], gr_scale(d, q.share));
-        if (q.moves & 2u) repeat[q.j] = gr_sub(repeat[q.j], gr_scale(d, 1.0f - q.share));
+        gr_warm_repeat(&q, &normal[3 * k], factor[k], repeat.data());
         return 0.0f;
       });
     };
     sum_repeat();
     std::vector<float>& balance = warm_balance_;
-    std::vector<gr_float3>& external = warm_external_;  // G_i
-    balance.assign(n, 0.0f);
-    external.assign(n, zero);
+    std::vector<float>& external = warm_external_;  // G_i
+    balance.resize(n);
+    external.resize(3 * n);
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-    for (int i = 0; i < ni; ++i) {
-      if (!(g.inv_mass[i] > 0.0f)) {
-        balance[i] = 1.0f;  // fixed grains do not move: they take any load
-        continue;
-      }
-      const gr_float3 G =
-          gr_sub(gr_sub(gr_load3(p, i), gr_load3(P, i)), gr_scale(gr_load3(g.v, i), dt));
-      external[i] = G;
-      const float dd = gr_dot(repeat[i], repeat[i]);
-      if (gr_dot(G, G) > 0.0f && dd > 0.0f)
-        balance[i] = std::clamp(-gr_dot(repeat[i], G) / dd, 0.0f, 1.0f);
-    }
+    for (int i = 0; i < ni; ++i)
+      balance[i] = gr_warm_balance(&g, p, dt, repeat.data(), i, external.data());
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-    for (long k = 0; k < lm; ++k) {
-      const SeqContact& q = seq_[k];
-      if (!(factor[k] > 0.0f)) continue;
-      factor[k] = q.j >= 0 ? std::min(balance[q.i], balance[q.j]) : balance[q.i];
-    }
-    // The scaled loads must not throw a grain off balance by more than a cold start would or a
-    // tenth of its radius, |D' + G| <= max(|G|, r / 10) (D' what they give it): a grain whose
+    for (long k = 0; k < lm; ++k)
+      if (factor[k] > 0.0f) factor[k] = gr_warm_factor(&seq_[k], balance.data());
+    // The scaled loads must not throw a grain off balance by more than a cold start would or
+    // a tenth of its radius, |D' + G| <= max(|G|, r / 10) (D' what they give it): a grain whose
     // contacts are scaled unequally, a light grain under a heavy one (their contact halved by
     // the heavy grain's balance) on the ground (kept whole), would be shot up by the difference,
     // 1.7 radii at 1000:1. Each such grain starts cold, all its contacts with it, until none is
@@ -420,14 +388,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       cut = 0;
       sum_repeat();
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
-      for (int i = 0; i < ni; ++i) {
-        const gr_float3 off = gr_add(repeat[i], external[i]);  // D' + G
-        const float el = gr_length(external[i]);
-        const float lift = el > 0.0f ? -gr_dot(off, external[i]) / el : 0.0f;
-        cold[i] =
-            g.inv_mass[i] > 0.0f && (gr_length(off) > std::max(el, kWarmSlack * g.radius[i]) ||
-                                     lift > kWarmLift * g.radius[i]);
-      }
+      for (int i = 0; i < ni; ++i) cold[i] = gr_warm_cold(&g, repeat.data(), external.data(), i);
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel) reduction(| : cut)
       for (long k = 0; k < lm; ++k) {
         const SeqContact& q = seq_[k];
@@ -436,16 +397,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
     sweep([&](SeqContact& q) -> float {
       const size_t k = static_cast<size_t>(&q - seq_.data());
-      const float f = factor[k];
-      if (!(f > 0.0f)) {
-        q.ln = 0.0f, q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;  // a cold start
-        return 0.0f;
-      }
-      q.ln *= f;
-      const gr_float3 t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), f);
-      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
-      const gr_float3 d = gr_add(gr_scale(normal[k], q.ln), t);
-      apply(q, d);
+      gr_warm_apply(p, &q, &normal[3 * k], factor[k]);
       return 0.0f;
     });
   }
@@ -460,30 +412,32 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // over_relaxation: successive over-relaxation of the normal loads (omega > 1 pushes past the
   // contact, the next pass takes back what overshot)
   const float relax = prm.over_relaxation;
-  if (c.s.use_opencl) {
-    // the passes on the device, the same pass in the same order (opencl/iterations.h); shape
-    // matching stays here, so with shapes each pass is a call of its own and the pins follow
-    // the shapes here
+  if (device) {
+    // pre-stabilization, the velocity it takes back, the warm start (on_device, set above) and
+    // the passes on the device in one call, the same steps in the same order
+    // (opencl/iterations.h); shape matching stays here, so with shapes each pass is a call of
+    // its own and the pins follow the shapes here
     opencl::SequentialContacts on = device_contacts();
     on.relax = relax;
     on.others = other_groups ? &others : nullptr;
     on.others_prm = &others_prm;
-    opencl::Iterations& device = open_device();
+    opencl::Iterations& cl = open_device();
     const opencl::IterationSizes size = device_sizes(c);
     if (!c.shapes_on) {
-      device.run_sequential(g, prm, size, p_.data(), on, c.iterations);
+      cl.solve_sequential(g, prm, size, p_.data(), on, on_device, c.iterations);
     } else {
       gr_grains unpinned = g;
       unpinned.targetP = nullptr;
+      cl.solve_sequential(unpinned, prm, size, p_.data(), on, on_device, 0);
       for (int it = 0; it < c.iterations; ++it) {
-        device.run_sequential(unpinned, prm, size, p_.data(), on, 1);
+        cl.run_sequential(unpinned, prm, size, p_.data(), on, 1);
         project_shapes(g, prm, c.threads);
         if (g.targetP) project_pins(c);
       }
     }
     p = p_.data();
   }
-  for (int it = 0; it < c.iterations && !c.s.use_opencl; ++it) {
+  for (int it = 0; it < c.iterations && !device; ++it) {
     if (other_groups) {
       const long ln = static_cast<long>(n);
       const gr_normal_sums none{nullptr, nullptr, nullptr, nullptr, nullptr};

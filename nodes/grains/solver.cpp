@@ -615,6 +615,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
+  stabilize_passes_ = 0;
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
   gr_grains g;
@@ -1219,8 +1220,10 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
     // the same passes on the device (opencl/iterations.h)
     opencl::IterationSizes size = device_sizes(*device);
     if (!pairs) size.pair_entries = 0;
-    open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max,
-                            [](int, float moved) { return moved > kStabilizeTolerance; });
+    open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max, [&](int, float moved) {
+      ++stabilize_passes_;
+      return moved > kStabilizeTolerance;
+    });
   }
   for (int k = 0; k < stabilize_max && !device; ++k) {
     const float* x = P_stable_.data();
@@ -1234,6 +1237,7 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
       gr_store3(next, i, y);
     }
     P_stable_.swap(p_stable_next_);
+    ++stabilize_passes_;
     if (!(moved > kStabilizeTolerance)) break;
   }
   float* p = p_.data();

@@ -141,6 +141,8 @@ class GrainsSolver {
   void load_state(StateReader& r);
   // substeps so far whose gauss_seidel contact list was the last substep's (seq_list_kept)
   size_t contact_lists_kept() const { return seq_lists_kept_; }
+  // the pre-stabilization passes the last substep ran (either solver; 0 when it ran none)
+  int stabilize_passes() const { return stabilize_passes_; }
   // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
   // it searched none (no contacts and no clumping). Valid until the next substep.
   const NeighborList* candidates() const { return candidates_on_ ? &neighbors_ : nullptr; }
@@ -271,6 +273,7 @@ class GrainsSolver {
   // last substep's list
   bool seq_valid_ = false;
   size_t seq_lists_kept_ = 0;
+  int stabilize_passes_ = 0;  // stabilize_passes()
   std::vector<float> seq_grain_, seq_grain_now_;
   std::vector<gr_uint> seq_plane_offsets_;
   std::vector<int32_t> seq_plane_collider_;
@@ -292,7 +295,7 @@ class GrainsSolver {
   opencl::SequentialContacts device_contacts();
   // the warm start's per-contact and per-grain working arrays, kept between substeps
   std::vector<float> warm_factor_, warm_balance_;
-  std::vector<gr_float3> warm_normal_, warm_repeat_, warm_external_;
+  std::vector<float> warm_normal_, warm_repeat_, warm_external_;  // 3 a contact, 3 a grain
   std::vector<uint8_t> warm_cold_;
   std::vector<float> friction_dx_;  // (n x 3) m: friction received this substep (accurate)
   // the history saved at the end of the last substep, by grain in that substep's order: the id

@@ -111,6 +111,12 @@ struct Iterations::Impl {
   // largest move of each block in a pass
   Buffer stable, carried, carried_flag, block_most;
   cl_kernel stabilize = nullptr;
+  // the warm start's (kernels/warm.h) and its buffers: each contact's normal and factor, each
+  // grain's velocity, repeated displacement, external step, balance and cold flag
+  cl_kernel warm_open = nullptr, warm_factor = nullptr, warm_cut = nullptr, warm_balance = nullptr,
+            warm_cold = nullptr, take_back = nullptr, warm_repeat = nullptr, warm_apply = nullptr;
+  Buffer velocity, repeat, external, balance, cold, cut;
+  std::vector<Buffer> normal, factor;  // by part of the contacts, as seq
   // the Jacobi path's: a pass, and the largest move's parts
   cl_kernel stabilize_grains = nullptr, largest_part = nullptr;
   Buffer moved, moved_part;
@@ -128,13 +134,17 @@ struct Iterations::Impl {
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
                       &target, &target_weight, &target_stiffness, &block_start, &colour_blocks,
-                      &stable, &carried, &carried_flag, &block_most, &moved, &moved_part})
+                      &stable, &carried, &carried_flag, &block_most, &moved, &moved_part,
+                      &velocity, &repeat, &external, &balance, &cold, &cut})
       b->release();
-    for (Buffer& b : seq) b.release();
+    for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
+      for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums})
       b->release();
-    for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, stabilize_grains,
+    for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
+                        warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
+                        warm_apply, stabilize_grains,
                         largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
       if (k) clReleaseKernel(k);
@@ -171,10 +181,25 @@ struct Iterations::Impl {
   // kernel k's arguments that sweep_colour sets for each part: its contacts, the colour's first
   // block there (in s.colour_blocks), their count, the part's first contact
   struct PartArgs {
+    static constexpr cl_uint kNoArg = ~cl_uint(0);
     cl_uint seq, first, count, base;
+    cl_uint normal = kNoArg, factor = kNoArg;  // the part's normal and factor buffers, if taken
   };
   // launches k (a work-item a block) over each part of colour c's blocks
   void sweep_colour(cl_kernel k, PartArgs at, const SequentialContacts& s, size_t c);
+  // s's contacts from the device (after upload_contacts)
+  void download_contacts(const SequentialContacts& s);
+  // `iterations` passes of gauss_seidel on the uploaded grains (inputs: upload_grains') and
+  // contacts, from p; returns the buffer holding the result (p or next)
+  Buffer* sequential_passes(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                            const SequentialContacts& s, int iterations, const HostArray* inputs);
+  // launches the per-contact kernel k over each part of the contacts, its arguments seq_arg,
+  // seq_arg + 1 and + 2 set to the part's contacts, its first contact's number and its count
+  // (and normal_arg, factor_arg to the part's normal and factor)
+  void each_part(cl_kernel k, cl_uint seq_arg, const SequentialContacts& s,
+                 cl_uint normal_arg = PartArgs::kNoArg, cl_uint factor_arg = PartArgs::kNoArg);
+  // k, created from the program the first time (name: its kernel's)
+  cl_kernel kernel(cl_kernel& k, const char* name);
   // the neighbour kernels, when the program has them (a device with cl_khr_fp64)
   void open_neighbours();
   // an exclusive prefix sum of x's n counts in place, the total at x[n] (x holds n + 1)

@@ -13,6 +13,7 @@
 #include "pin.h"
 #include "sequential.h"
 #include "velocity.h"
+#include "warm.h"
 
 /* The per-grain arrays of gr_grains as kernel arguments (a kernel argument cannot hold pointers
  * in OpenCL C 1.2), in the order opencl/iterations.cpp sets them; a missing one is null, as on
@@ -103,6 +104,113 @@ __kernel void gr_k_friction(gr_params prm, GR_GRAINS_ARGS, __global const float*
   const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
   const gr_normal_sums acc = gr_device_sums(0, 0, i, pair_sum, collider_sum, collider_dx, friction_dx);
   gr_store3(next, i, gr_friction_pass(&g, &prm, p, &acc, i));
+}
+
+/* gauss_seidel's warm start (kernels/warm.h; solve_sequential in opencl/iterations.cpp launches
+ * these in gauss_seidel.cpp's order). Per contact, part by part where the contacts are split
+ * over buffers: work-item t has contact k = base + t, at seq[t], its normal and factor in the
+ * part's normal[3 t ...] and factor[t] (loaded is one array over all the contacts). */
+__kernel void gr_k_warm_open(gr_params prm, GR_GRAINS_ARGS, __global const float* p,
+                             __global gr_seq_contact* seq, gr_uint base, int count,
+                             __global const uchar* loaded, __global float* normal,
+                             __global float* factor) {
+  const int t = (int)get_global_id(0);
+  size_t k;
+  if (t >= count) return;
+  k = base + (size_t)t;
+  if (!loaded[k]) {
+    factor[t] = 0.0f;
+    normal[3 * t] = normal[3 * t + 1] = normal[3 * t + 2] = 0.0f;
+    return;
+  }
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    factor[t] = gr_warm_open(&g, p, seq + t, normal + 3 * (size_t)t);
+  }
+}
+
+__kernel void gr_k_warm_factor(__global const gr_seq_contact* seq, gr_uint base, int count,
+                               __global const float* balance, __global float* factor) {
+  const int t = (int)get_global_id(0);
+  if (t >= count) return;
+  if (factor[t] > 0.0f) factor[t] = gr_warm_factor(seq + t, balance);
+}
+
+/* a contact with a grain gone cold starts cold; *cut set when any does */
+__kernel void gr_k_warm_cut(__global const gr_seq_contact* seq, gr_uint base, int count,
+                            __global const uchar* cold, __global float* factor,
+                            __global volatile int* cut) {
+  const int t = (int)get_global_id(0);
+  __global const gr_seq_contact* q = seq + t;
+  if (t >= count) return;
+  if (factor[t] > 0.0f && (cold[q->i] || (q->j >= 0 && cold[q->j]))) {
+    factor[t] = 0.0f;
+    atomic_or(cut, 1);
+  }
+}
+
+/* per grain: the balance (and the external step), whether it goes cold, and the velocity
+ * pre-stabilization takes back */
+__kernel void gr_k_warm_balance(gr_params prm, GR_GRAINS_ARGS, __global const float* v,
+                                __global const float* p, __global const float* repeat,
+                                __global float* external, __global float* balance, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    g.v = v;
+    balance[i] = gr_warm_balance(&g, p, prm.dt, repeat, i, external);
+  }
+}
+
+__kernel void gr_k_warm_cold(gr_params prm, GR_GRAINS_ARGS, __global const float* repeat,
+                             __global const float* external, __global uchar* cold, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    cold[i] = (uchar)gr_warm_cold(&g, repeat, external, i);
+  }
+}
+
+__kernel void gr_k_warm_take_back(gr_params prm, GR_GRAINS_ARGS, __global float* v,
+                                  __global float* p, __global const float* carried,
+                                  float inv_last, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_warm_take_back(&g, v, p, carried, inv_last, prm.dt, i);
+  }
+}
+
+/* block sweeps, colour by colour as the passes: each block's contacts in order add their
+ * scaled loads to what their grains receive (repeat), or scale and apply them to p (seq, normal
+ * and factor the part's, from contact base on) */
+__kernel void gr_k_warm_repeat(__global const gr_seq_contact* seq, __global const gr_uint* block_start,
+                               __global const gr_uint* blocks, int first, int count, gr_uint base,
+                               __global const float* normal, __global const float* factor,
+                               __global float* repeat) {
+  const int t = (int)get_global_id(0);
+  gr_uint b, k, e;
+  if (t >= count) return;
+  b = blocks[first + t];
+  e = block_start[b + 1];
+  for (k = block_start[b]; k < e; ++k)
+    gr_warm_repeat(seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base], repeat);
+}
+
+__kernel void gr_k_warm_apply(__global float* p, __global gr_seq_contact* seq,
+                              __global const gr_uint* block_start, __global const gr_uint* blocks,
+                              int first, int count, gr_uint base, __global const float* normal,
+                              __global const float* factor) {
+  const int t = (int)get_global_id(0);
+  gr_uint b, k, e;
+  if (t >= count) return;
+  b = blocks[first + t];
+  e = block_start[b + 1];
+  for (k = block_start[b]; k < e; ++k)
+    gr_warm_apply(p, seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base]);
 }
 
 /* one pass of the Jacobi path's pre-stabilization: next = gr_stabilize(x), and each grain's

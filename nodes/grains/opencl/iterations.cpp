@@ -248,6 +248,8 @@ void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialCo
     const int count = static_cast<int>(hi - lo);
     const gr_uint base = s.block_start[part_block[part]];
     set_buffer(k, at.seq, &seq[part]);
+    if (at.normal != PartArgs::kNoArg) set_buffer(k, at.normal, &normal[part]);
+    if (at.factor != PartArgs::kNoArg) set_buffer(k, at.factor, &factor[part]);
     check(clSetKernelArg(k, at.first, sizeof(int), &first), "clSetKernelArg");
     check(clSetKernelArg(k, at.count, sizeof(int), &count), "clSetKernelArg");
     check(clSetKernelArg(k, at.base, sizeof(gr_uint), &base), "clSetKernelArg");
@@ -257,62 +259,67 @@ void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialCo
   }
 }
 
-void Iterations::run_sequential(const gr_grains& g, const gr_params& prm,
-                                const IterationSizes& size, float* p, const SequentialContacts& s,
-                                int iterations) {
+void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                                float* p, const SequentialContacts& s, int iterations) {
   Impl& m = *impl_;
   const size_t n = size.n;
   if (n == 0) return;
-  const size_t f = sizeof(float);
   HostArray inputs[kArrays];
   m.upload_grains(g, size, p, inputs);
   m.upload_contacts(s);
+  Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
+  m.download(*result, p, 3 * n * sizeof(float));
+  m.download_contacts(s);
+}
 
+void Iterations::Impl::download_contacts(const SequentialContacts& s) {
+  for (size_t k = 0; k + 1 < part_block.size(); ++k) {
+    const size_t first = s.block_start[part_block[k]], count = s.block_start[part_block[k + 1]] - first;
+    download(seq[k], s.contacts + first, count * sizeof(gr_seq_contact));
+  }
+}
+
+Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params& prm,
+                                            const IterationSizes& size, const SequentialContacts& s,
+                                            int iterations, const HostArray* inputs) {
+  const size_t n = size.n;
   const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup;
-  Buffer* from = &m.p;
-  Buffer* to = &m.next;
+  Buffer* from = &p;
+  Buffer* to = &next;
   // the others' Jacobi group: gr_k_iterate with their arrays and no sums
   if (s.others) {
     HostArray theirs[kArrays];
     grain_arrays(*s.others, size, theirs);
-    m.set_grains(m.others, *s.others_prm, *s.others, theirs);
+    set_grains(others, *s.others_prm, *s.others, theirs);
     const int count = static_cast<int>(n);
     const gr_uint none = 0;
     for (cl_uint a = kFirstOwn + 2; a <= kFirstOwn + 7; ++a)
-      if (a == kFirstOwn + 3)
-        check(clSetKernelArg(m.others, a, sizeof(gr_uint), &none), "clSetKernelArg");
-      else
-        set_buffer(m.others, a, nullptr);
-    check(clSetKernelArg(m.others, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+      if (a == kFirstOwn + 3) check(clSetKernelArg(others, a, sizeof(gr_uint), &none), "clSetKernelArg");
+      else set_buffer(others, a, nullptr);
+    check(clSetKernelArg(others, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
   }
   // the contacts: p, seq, block_start, blocks, first, count, relax, base (seq, first, count and
   // base by colour and part)
-  m.set_grains(m.sequential, prm, g, inputs);
-  set_buffer(m.sequential, kFirstOwn + 2, &m.block_start);
-  set_buffer(m.sequential, kFirstOwn + 3, &m.colour_blocks);
-  check(clSetKernelArg(m.sequential, kFirstOwn + 6, sizeof(float), &s.relax), "clSetKernelArg");
-  const Impl::PartArgs at{kFirstOwn + 1, kFirstOwn + 4, kFirstOwn + 5, kFirstOwn + 7};
+  set_grains(sequential, prm, g, inputs);
+  set_buffer(sequential, kFirstOwn + 2, &block_start);
+  set_buffer(sequential, kFirstOwn + 3, &colour_blocks);
+  check(clSetKernelArg(sequential, kFirstOwn + 6, sizeof(float), &s.relax), "clSetKernelArg");
+  const PartArgs at{kFirstOwn + 1, kFirstOwn + 4, kFirstOwn + 5, kFirstOwn + 7};
   const bool pins = g.targetP && g.targetstiffness;
-  if (pins) m.set_pins(g, prm, n);
+  if (pins) set_pins(g, prm, n);
   for (int it = 0; it < iterations; ++it) {
     if (s.others) {
-      set_buffer(m.others, kFirstOwn, from);
-      set_buffer(m.others, kFirstOwn + 1, to);
-      check(clEnqueueNDRangeKernel(m.queue, m.others, 1, nullptr, &global, &local, 0, nullptr,
-                                   nullptr),
+      set_buffer(others, kFirstOwn, from);
+      set_buffer(others, kFirstOwn + 1, to);
+      check(clEnqueueNDRangeKernel(queue, others, 1, nullptr, &global, &local, 0, nullptr, nullptr),
             "clEnqueueNDRangeKernel");
       std::swap(from, to);
     }
-    set_buffer(m.sequential, kFirstOwn, from);
-    for (size_t c = 0; c < s.colours && s.count > 0; ++c) m.sweep_colour(m.sequential, at, s, c);
-    if (pins) m.project_pins(from, global);
+    set_buffer(sequential, kFirstOwn, from);
+    for (size_t c = 0; c < s.colours && s.count > 0; ++c) sweep_colour(sequential, at, s, c);
+    if (pins) project_pins(from, global);
   }
-  m.download(*from, p, 3 * n * f);
-  for (size_t k = 0; k + 1 < m.part_block.size(); ++k) {
-    const size_t first = s.block_start[m.part_block[k]],
-                 count = s.block_start[m.part_block[k + 1]] - first;
-    m.download(m.seq[k], s.contacts + first, count * sizeof(gr_seq_contact));
-  }
+  return from;
 }
 
 void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
@@ -362,50 +369,185 @@ void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const Itera
   m.download(*from, x, 3 * n * f);
 }
 
-void Iterations::stabilize_sequential(const gr_grains& g, const gr_params& prm,
-                                      const IterationSizes& size, float* x, float* p,
-                                      float* carried, const uint8_t* carried_flag,
-                                      const SequentialContacts& s, int most,
-                                      const std::function<bool(int, float)>& go_on) {
+void Iterations::Impl::each_part(cl_kernel k, cl_uint seq_arg, const SequentialContacts& s,
+                                 cl_uint normal_arg, cl_uint factor_arg) {
+  const size_t local = kGroup;
+  for (size_t part = 0; part + 1 < part_block.size(); ++part) {
+    const gr_uint base = s.block_start[part_block[part]];
+    const int count = static_cast<int>(s.block_start[part_block[part + 1]] - base);
+    if (count == 0) continue;
+    set_buffer(k, seq_arg, &seq[part]);
+    if (normal_arg != PartArgs::kNoArg) set_buffer(k, normal_arg, &normal[part]);
+    if (factor_arg != PartArgs::kNoArg) set_buffer(k, factor_arg, &factor[part]);
+    check(clSetKernelArg(k, seq_arg + 1, sizeof(gr_uint), &base), "clSetKernelArg");
+    check(clSetKernelArg(k, seq_arg + 2, sizeof(int), &count), "clSetKernelArg");
+    const size_t items = (static_cast<size_t>(count) + kGroup - 1) / kGroup * kGroup;
+    check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &items, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+  }
+}
+
+cl_kernel Iterations::Impl::kernel(cl_kernel& k, const char* name) {
+  if (!k) {
+    cl_int status = CL_SUCCESS;
+    k = clCreateKernel(program, name, &status);
+    check(status, name);
+  }
+  return k;
+}
+
+void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                                  float* p, const SequentialContacts& s, const SequentialSolve& w,
+                                  int iterations) {
   Impl& m = *impl_;
   const size_t n = size.n;
-  if (n == 0 || s.count == 0 || most <= 0) return;
+  if (n == 0) return;
   const size_t f = sizeof(float);
-  if (!m.stabilize) {
-    cl_int status = CL_SUCCESS;
-    m.stabilize = clCreateKernel(m.program, "gr_k_stabilize", &status);
-    check(status, "clCreateKernel(gr_k_stabilize)");
-  }
+  const int count = static_cast<int>(n);
+  const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup;
+  auto per_grain = [&](cl_kernel k) {
+    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+  };
   HostArray inputs[kArrays];
   m.upload_grains(g, size, p, inputs);
-  m.upload(m.stable, x, (3 * n + 1) * f);
-  m.upload(m.carried, carried, 3 * n * f);
-  m.upload(m.carried_flag, carried_flag, s.count);
   m.upload_contacts(s);
-  m.block_most.reserve(m.ctx, s.blocks * f, m.largest);
-  // x, p, carried, carried_flag, seq, block_start, blocks, first, count, base, most
-  cl_kernel k = m.stabilize;
-  m.set_grains(k, prm, g, inputs);
-  set_buffer(k, kFirstOwn, &m.stable);
-  set_buffer(k, kFirstOwn + 1, &m.p);
-  set_buffer(k, kFirstOwn + 2, carried ? &m.carried : nullptr);
-  set_buffer(k, kFirstOwn + 3, carried_flag ? &m.carried_flag : nullptr);
-  set_buffer(k, kFirstOwn + 5, &m.block_start);
-  set_buffer(k, kFirstOwn + 6, &m.colour_blocks);
-  set_buffer(k, kFirstOwn + 10, &m.block_most);
-  const Impl::PartArgs at{kFirstOwn + 4, kFirstOwn + 7, kFirstOwn + 8, kFirstOwn + 9};
-  std::vector<float> block_most(s.blocks);
-  for (int pass = 0; pass < most; ++pass) {
-    for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(k, at, s, c);
-    // the pass's largest move (each block is swept once a pass: in one colour, one part)
-    m.download(m.block_most, block_most.data(), s.blocks * f);
-    float moved = 0.0f;
-    for (const float b : block_most) moved = std::max(moved, b);
-    if (!go_on(pass, moved)) break;
+  const bool contacts = s.count > 0;
+  if (contacts && w.loaded) m.upload(m.carried_flag, w.loaded, s.count);
+
+  // pre-stabilization: x, p, carried, carried_flag, seq, block_start, blocks, first, count, base,
+  // most
+  if (w.x) {
+    m.upload(m.stable, w.x, (3 * n + 1) * f);
+    m.upload(m.carried, w.carried, 3 * n * f);
+    if (contacts && w.most > 0) {
+      cl_kernel k = m.kernel(m.stabilize, "gr_k_stabilize");
+      m.block_most.reserve(m.ctx, s.blocks * f, m.largest);
+      m.set_grains(k, prm, g, inputs);
+      set_buffer(k, kFirstOwn, &m.stable);
+      set_buffer(k, kFirstOwn + 1, &m.p);
+      set_buffer(k, kFirstOwn + 2, w.carried ? &m.carried : nullptr);
+      set_buffer(k, kFirstOwn + 3, w.carried && w.loaded ? &m.carried_flag : nullptr);
+      set_buffer(k, kFirstOwn + 5, &m.block_start);
+      set_buffer(k, kFirstOwn + 6, &m.colour_blocks);
+      set_buffer(k, kFirstOwn + 10, &m.block_most);
+      const Impl::PartArgs at{kFirstOwn + 4, kFirstOwn + 7, kFirstOwn + 8, kFirstOwn + 9};
+      std::vector<float> block_most(s.blocks);
+      for (int pass = 0; pass < w.most; ++pass) {
+        for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(k, at, s, c);
+        // the pass's largest move (each block is swept once a pass: in one colour, one part)
+        m.download(m.block_most, block_most.data(), s.blocks * f);
+        float moved = 0.0f;
+        for (const float b : block_most) moved = std::max(moved, b);
+        if (!w.go_on(pass, moved)) break;
+      }
+    }
   }
-  m.download(m.stable, x, 3 * n * f);
-  m.download(m.p, p, 3 * n * f);
-  m.download(m.carried, carried, 3 * n * f);
+  // the velocity pre-stabilization takes back: v, p, carried, inv_last, n
+  const bool velocities = w.carried || (contacts && w.loaded);
+  if (velocities) m.upload(m.velocity, w.v ? w.v : g.v, 3 * n * f);
+  if (w.x && w.carried) {
+    cl_kernel k = m.kernel(m.take_back, "gr_k_warm_take_back");
+    m.set_grains(k, prm, g, inputs);
+    set_buffer(k, kFirstOwn, &m.velocity);
+    set_buffer(k, kFirstOwn + 1, &m.p);
+    set_buffer(k, kFirstOwn + 2, &m.carried);
+    check(clSetKernelArg(k, kFirstOwn + 3, sizeof(float), &w.inv_last), "clSetKernelArg");
+    check(clSetKernelArg(k, kFirstOwn + 4, sizeof(int), &count), "clSetKernelArg");
+    per_grain(k);
+  }
+  // the pre-stabilized start is the substep's start from here on (g.P)
+  if (w.x)
+    check(clEnqueueCopyBuffer(m.queue, m.stable.mem, m.arrays[kP].mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+
+  // the warm start, in gauss_seidel.cpp's order
+  if (contacts && w.loaded) {
+    // each part's normals and factors (3 and 1 floats a contact: within the largest buffer
+    // where the part's contacts, 56 bytes each, are)
+    const size_t parts = m.part_block.size() - 1;
+    for (std::vector<Buffer>* b : {&m.normal, &m.factor}) {
+      for (size_t k = parts; k < b->size(); ++k) (*b)[k].release();
+      b->resize(parts);
+    }
+    for (size_t k = 0; k < parts; ++k) {
+      const size_t part = s.block_start[m.part_block[k + 1]] - s.block_start[m.part_block[k]];
+      m.normal[k].reserve(m.ctx, 3 * part * f, m.largest);
+      m.factor[k].reserve(m.ctx, part * f, m.largest);
+    }
+    m.repeat.reserve(m.ctx, 3 * n * f, m.largest);
+    m.external.reserve(m.ctx, 3 * n * f, m.largest);
+    m.balance.reserve(m.ctx, n * f, m.largest);
+    m.cold.reserve(m.ctx, n, m.largest);
+    m.cut.reserve(m.ctx, sizeof(int), m.largest);
+    // each loaded contact's load kept across its normal: prm, grains, p, seq, base, count,
+    // loaded, normal, factor
+    cl_kernel open = m.kernel(m.warm_open, "gr_k_warm_open");
+    m.set_grains(open, prm, g, inputs);
+    set_buffer(open, kFirstOwn, &m.p);
+    set_buffer(open, kFirstOwn + 4, &m.carried_flag);
+    m.each_part(open, kFirstOwn + 1, s, kFirstOwn + 5, kFirstOwn + 6);
+    // what the scaled loads give each grain: seq, block_start, blocks, first, count, base,
+    // normal, factor, repeat
+    cl_kernel repeat = m.kernel(m.warm_repeat, "gr_k_warm_repeat");
+    set_buffer(repeat, 1, &m.block_start);
+    set_buffer(repeat, 2, &m.colour_blocks);
+    set_buffer(repeat, 8, &m.repeat);
+    auto sum_repeat = [&] {
+      const float zero = 0.0f;
+      check(clEnqueueFillBuffer(m.queue, m.repeat.mem, &zero, f, 0, 3 * n * f, 0, nullptr, nullptr),
+            "clEnqueueFillBuffer");
+      for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(repeat, Impl::PartArgs{0, 3, 4, 5, 6, 7}, s, c);
+    };
+    sum_repeat();
+    // each grain's balance: prm, grains, v, p, repeat, external, balance, n
+    cl_kernel balance = m.kernel(m.warm_balance, "gr_k_warm_balance");
+    m.set_grains(balance, prm, g, inputs);
+    set_buffer(balance, kFirstOwn, &m.velocity);
+    set_buffer(balance, kFirstOwn + 1, &m.p);
+    set_buffer(balance, kFirstOwn + 2, &m.repeat);
+    set_buffer(balance, kFirstOwn + 3, &m.external);
+    set_buffer(balance, kFirstOwn + 4, &m.balance);
+    check(clSetKernelArg(balance, kFirstOwn + 5, sizeof(int), &count), "clSetKernelArg");
+    per_grain(balance);
+    // each contact's factor: seq, base, count, balance, factor
+    cl_kernel factor = m.kernel(m.warm_factor, "gr_k_warm_factor");
+    set_buffer(factor, 3, &m.balance);
+    m.each_part(factor, 0, s, Impl::PartArgs::kNoArg, 4);
+    // grains thrown off balance start cold with their contacts, until none is: prm, grains,
+    // repeat, external, cold, n; then seq, base, count, cold, factor, cut
+    cl_kernel cold = m.kernel(m.warm_cold, "gr_k_warm_cold");
+    m.set_grains(cold, prm, g, inputs);
+    set_buffer(cold, kFirstOwn, &m.repeat);
+    set_buffer(cold, kFirstOwn + 1, &m.external);
+    set_buffer(cold, kFirstOwn + 2, &m.cold);
+    check(clSetKernelArg(cold, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
+    cl_kernel cut = m.kernel(m.warm_cut, "gr_k_warm_cut");
+    set_buffer(cut, 3, &m.cold);
+    set_buffer(cut, 5, &m.cut);
+    for (int any = 1; any;) {
+      any = 0;
+      sum_repeat();
+      per_grain(cold);
+      check(clEnqueueWriteBuffer(m.queue, m.cut.mem, CL_FALSE, 0, sizeof any, &any, 0, nullptr, nullptr),
+            "clEnqueueWriteBuffer");
+      m.each_part(cut, 0, s, Impl::PartArgs::kNoArg, 4);
+      m.download(m.cut, &any, sizeof any);
+    }
+    // the loads scaled and applied: p, seq, block_start, blocks, first, count, base, normal,
+    // factor
+    cl_kernel apply = m.kernel(m.warm_apply, "gr_k_warm_apply");
+    set_buffer(apply, 0, &m.p);
+    set_buffer(apply, 2, &m.block_start);
+    set_buffer(apply, 3, &m.colour_blocks);
+    for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(apply, Impl::PartArgs{1, 4, 5, 6, 7, 8}, s, c);
+  }
+
+  Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
+  m.download(*result, p, 3 * n * f);
+  if (w.x) m.download(m.stable, w.x, 3 * n * f);
+  if (w.carried) m.download(m.velocity, w.v, 3 * n * f);
+  m.download_contacts(s);
 }
 
 }  // namespace grains::opencl

@@ -48,6 +48,25 @@ struct SequentialContacts {
   const gr_params* others_prm = nullptr;
 };
 
+// What contact_solver gauss_seidel's device solve does before its passes (solve_sequential)
+struct SequentialSolve {
+  // pre-stabilization (gr_seq_stabilize) of the start positions x (3 n + 1 floats, in and out,
+  // null: none) and p, pass after pass while go_on(pass, the pass's largest move) says so, at
+  // most `most` passes
+  float* x = nullptr;
+  int most = 0;
+  std::function<bool(int, float)> go_on;
+  // a byte a contact, 1 when it carries a load (waiting in its accumulators, scaled to this
+  // substep): the warm start runs when set (kernels/warm.h)
+  const uint8_t* loaded = nullptr;
+  // what the loaded contacts' pre-stabilization moved each grain (3 n floats, zero in), and the
+  // velocities (3 n, in and out) it takes back (gr_warm_take_back, 1 / dt_last inv_last): null
+  // when nothing is taken back
+  float* carried = nullptr;
+  float* v = nullptr;
+  float inv_last = 0.0f;
+};
+
 class Iterations {
  public:
   // Opens the device chosen_device() names and builds the program there; throws
@@ -83,15 +102,13 @@ class Iterations {
   void stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* x,
                  int most, const std::function<bool(int, float)>& go_on);
 
-  // contact_solver gauss_seidel's pre-stabilization (gr_seq_stabilize) of the start positions x
-  // and the predicted p (3 n + 1 floats each, in and out), in the passes' order: pass after pass
-  // while go_on(pass, the pass's largest move) says so, at most `most` passes. carried (3 n
-  // floats, in and out) collects what the contacts flagged in carried_flag (a byte a contact)
-  // moved each grain; both null when none is. s's relax and others are not read.
-  void stabilize_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
-                            float* x, float* p, float* carried, const uint8_t* carried_flag,
-                            const SequentialContacts& s, int most,
-                            const std::function<bool(int, float)>& go_on);
+  // contact_solver gauss_seidel's solve from its contacts on, in one call (gauss_seidel.cpp's
+  // steps in its order, with one upload and one download): pre-stabilization when w.x is set,
+  // the velocity it takes back when w.carried is, the warm start when w.loaded is, then
+  // `iterations` passes as run_sequential's. p (3 n + 1 floats) and s.contacts in and out.
+  void solve_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                        float* p, const SequentialContacts& s, const SequentialSolve& w,
+                        int iterations);
 
   const std::string& device_name() const;
 

@@ -1,8 +1,10 @@
 // The OpenCL device's state, shared by the files that launch its kernels (iterations.cpp: the
-// passes; neighbours.cpp: the neighbour rows): the context, queue and program, the kernels and
-// the device buffers, which keep their size from call to call.
+// solves and passes; neighbours.cpp: the neighbour rows): the context, queue and program, the
+// kernels and the device buffers, which keep their size from call to call.
 #pragma once
 #include <algorithm>
+#include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 

@@ -1,13 +1,14 @@
-// The substep's passes on an OpenCL device (a grains node with use_opencl): the Jacobi
-// iterations and friction passes (run()), or contact_solver gauss_seidel's passes
-// (run_sequential()). GrainsSolver::substep prepares the substep on the CPU as always
-// (prediction, neighbour rows, collider planes, contact history or the contacts and their warm
-// start, pre-stabilization), hands the passes' inputs to the device, and finishes on the CPU
-// (velocity, final collisions, history, strain). The kernels call the functions the CPU loops
-// call (gr_iterate, gr_friction_pass, gr_seq_pass; opencl/grains.cl). Each Jacobi work-item
-// writes only its own grain and sums its contacts in row order; each Gauss-Seidel work-item sweeps
-// one block of contacts in order, no two blocks at once writing one grain: a device gives the
-// same result run to run.
+// The parts of the substep an OpenCL device runs (a grains node with use_opencl): the neighbour
+// rows (find_neighbours()), the Jacobi path's pre-stabilization (stabilize()), iterations and
+// friction passes (run()), and contact_solver gauss_seidel's solve from its contacts on
+// (solve_sequential(): pre-stabilization, the velocity it takes back, the warm start and the
+// passes; run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
+// (prediction, collider planes, contact history or the contact list and its carried loads;
+// velocity, final collisions, history, strain) and hands each call its inputs. The kernels call
+// the functions the CPU loops call (kernels/, engine/pair_test.h; opencl/grains.cl). Each
+// per-grain work-item writes only its own grain and sums in row order; each Gauss-Seidel
+// work-item sweeps one block of contacts in order, no two blocks at once writing one grain;
+// integer atomics only count: a device gives the same result run to run.
 #pragma once
 #include <cstddef>
 #include <cstdint>

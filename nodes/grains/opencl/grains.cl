@@ -106,6 +106,18 @@ __kernel void gr_k_friction(gr_params prm, GR_GRAINS_ARGS, __global const float*
   gr_store3(next, i, gr_friction_pass(&g, &prm, p, &acc, i));
 }
 
+/* work-item t's block of a colour's sweep, blocks[first + t] (count in all): its contacts
+ * [*begin, *end); 0 for a work-item past the colour's blocks */
+GR_INLINE int gr_sweep_block(int t, int first, int count, __global const gr_uint* blocks,
+                             __global const gr_uint* block_start, gr_uint* begin, gr_uint* end) {
+  gr_uint b;
+  if (t >= count) return 0;
+  b = blocks[first + t];
+  *begin = block_start[b];
+  *end = block_start[b + 1];
+  return 1;
+}
+
 /* gauss_seidel's warm start (kernels/warm.h; solve_sequential in opencl/iterations.cpp launches
  * these in gauss_seidel.cpp's order). Per contact, part by part where the contacts are split
  * over buffers: work-item t has contact k = base + t, at seq[t], its normal and factor in the
@@ -191,12 +203,9 @@ __kernel void gr_k_warm_repeat(__global const gr_seq_contact* seq, __global cons
                                __global const gr_uint* blocks, int first, int count, gr_uint base,
                                __global const float* normal, __global const float* factor,
                                __global float* repeat) {
-  const int t = (int)get_global_id(0);
-  gr_uint b, k, e;
-  if (t >= count) return;
-  b = blocks[first + t];
-  e = block_start[b + 1];
-  for (k = block_start[b]; k < e; ++k)
+  gr_uint k, e;
+  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
+  for (; k < e; ++k)
     gr_warm_repeat(seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base], repeat);
 }
 
@@ -204,12 +213,9 @@ __kernel void gr_k_warm_apply(__global float* p, __global gr_seq_contact* seq,
                               __global const gr_uint* block_start, __global const gr_uint* blocks,
                               int first, int count, gr_uint base, __global const float* normal,
                               __global const float* factor) {
-  const int t = (int)get_global_id(0);
-  gr_uint b, k, e;
-  if (t >= count) return;
-  b = blocks[first + t];
-  e = block_start[b + 1];
-  for (k = block_start[b]; k < e; ++k)
+  gr_uint k, e;
+  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
+  for (; k < e; ++k)
     gr_warm_apply(p, seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base]);
 }
 
@@ -259,14 +265,11 @@ __kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
                               __global gr_seq_contact* seq, __global const gr_uint* block_start,
                               __global const gr_uint* blocks, int first, int count, float relax,
                               gr_uint base) {
-  const int t = (int)get_global_id(0);
-  gr_uint b, k, e;
-  if (t >= count) return;
+  gr_uint k, e;
+  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
   {
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    b = blocks[first + t];
-    e = block_start[b + 1];
-    for (k = block_start[b]; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
+    for (; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
   }
 }
 
@@ -280,18 +283,16 @@ __kernel void gr_k_stabilize(gr_params prm, GR_GRAINS_ARGS, __global float* x, _
                              __global const gr_uint* blocks, int first, int count, gr_uint base,
                              __global float* most) {
   const int t = (int)get_global_id(0);
-  gr_uint b, k, e;
+  gr_uint k, e;
   float largest = 0.0f, moved;
-  if (t >= count) return;
+  if (!gr_sweep_block(t, first, count, blocks, block_start, &k, &e)) return;
   {
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    b = blocks[first + t];
-    e = block_start[b + 1];
-    for (k = block_start[b]; k < e; ++k) {
+    for (; k < e; ++k) {
       moved = gr_seq_stabilize(&g, x, p, carried_flag && carried_flag[k] ? carried : 0, seq + (k - base));
       largest = moved > largest ? moved : largest;
     }
-    most[b] = largest;
+    most[blocks[first + t]] = largest;
   }
 }
 

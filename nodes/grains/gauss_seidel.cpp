@@ -224,10 +224,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   };
 
   // each contact's carried load (the warm start's), found once: seq_loads_ index + 1, 0 for none;
-  // with a kept list the contact holds its own (kLoadInPlace)
-  // The carried load, scaled by (dt / dt_last)^2, waits in the contact's accumulators for the
-  // warm start (pre-stabilization does not read them), which keeps its tangential part across
-  // the contact's normal once the pre-stabilized positions are known (gr_warm_open)
+  // with a kept list the contact holds its own (kLoadInPlace). The load, scaled by
+  // (dt / dt_last)^2, waits in the contact's accumulators for the warm start (pre-stabilization
+  // does not read them), which keeps its tangential part across the contact's normal once the
+  // pre-stabilized positions are known (gr_warm_open)
   std::vector<uint32_t>& load_of = load_of_;
   const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
   if (warm) {
@@ -255,23 +255,11 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
   }
 
-  // pre-stabilization (Macklin et al. 2014 sec. 4.4), passes in the same order until no
-  // contact moves its grain more than kStabilizeTolerance of its radius (at most
-  // kStabilizeIterations): the overlap of the start positions, removed from start and prediction
-  // alike (no velocity, no friction). Not capped by the iterations, as the Jacobi passes are: an
-  // overlap left to the passes becomes a velocity overlap / dt, which grows as the substeps
-  // shrink (a DEM-settled column, whose soft contacts overlap 0.4% of d, burst at 128 substeps
-  // with 10 passes and ran out 1.06 L0; converged, 0.86 L0, DEM's). A substep that starts
-  // without carried loads (the first of a run) removes the overlap its input came with, however
-  // deep, for up to kColdStabilizeIterations passes: the DEM column's first substep still moved
-  // grains 0.083 r after 64 passes and needed 542, and what the cap left became velocity
-  // (overlap / dt, 2.5 m/s at 256 substeps a frame), which kept error control at 256 substeps
-  // for two frames and ran the column out 0.93 L0 instead of 0.86
   const bool device = c.s.use_opencl;
   // with use_opencl pre-stabilization, the velocity it takes back, the warm start and the passes
   // run on the device in one call, below (opencl/iterations.h: the same steps in the same order)
   opencl::SequentialSolve on_device;
-  std::vector<uint8_t>& loaded = carried_flag_;  // a byte a contact: 1 when it carries a load
+  std::vector<uint8_t>& loaded = loaded_;  // a byte a contact: 1 when it carries a load
   if (device && warm) {
     loaded.resize(seq_.size());
     for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;
@@ -289,6 +277,19 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     recent[pass % kStallPasses] = moved;
     return true;
   };
+
+  // pre-stabilization (Macklin et al. 2014 sec. 4.4), passes in the same order until no
+  // contact moves its grain more than kStabilizeTolerance of its radius (at most
+  // kStabilizeIterations): the overlap of the start positions, removed from start and prediction
+  // alike (no velocity, no friction). Not capped by the iterations, as the Jacobi passes are: an
+  // overlap left to the passes becomes a velocity overlap / dt, which grows as the substeps
+  // shrink (a DEM-settled column, whose soft contacts overlap 0.4% of d, burst at 128 substeps
+  // with 10 passes and ran out 1.06 L0; converged, 0.86 L0, DEM's). A substep that starts
+  // without carried loads (the first of a run) removes the overlap its input came with, however
+  // deep, for up to kColdStabilizeIterations passes: the DEM column's first substep still moved
+  // grains 0.083 r after 64 passes and needed 542, and what the cap left became velocity
+  // (overlap / dt, 2.5 m/s at 256 substeps a frame), which kept error control at 256 substeps
+  // for two frames and ran the column out 0.93 L0 instead of 0.86
   if (c.s.pre_stabilization) {
     const int most_passes = warm ? kStabilizeIterations : kColdStabilizeIterations;
     P_stable_.assign(P, P + 3 * n);

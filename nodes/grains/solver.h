@@ -290,7 +290,7 @@ class GrainsSolver {
   // carried contacts' pre-stabilization moved each grain (3 a grain)
   std::vector<uint32_t> load_of_;
   std::vector<float> carried_move_;
-  std::vector<uint8_t> carried_flag_;  // use_opencl: 1 for a contact with a carried load
+  std::vector<uint8_t> loaded_;  // use_opencl: 1 for a contact with a carried load
   // seq_ and its blocks and colours as opencl::Iterations takes them
   opencl::SequentialContacts device_contacts();
   // the warm start's per-contact and per-grain working arrays, kept between substeps

@@ -65,6 +65,11 @@ struct GrainsSettings {
   // TimeInfo::stabilize)
   bool keep_velocity = false;
   int threads = 0;  // 0: OpenMP default
+  // contact_solver gauss_seidel's sweep order within a block: in waves (GrainsSolver::
+  // order_waves), the order a device whose work-items share a block needs, instead of by lower
+  // index. The solver takes it by itself for such a device (use_opencl on a GPU); set, the CPU
+  // path sweeps the device's order (the tests compare the two)
+  bool sweep_waves = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -146,6 +151,10 @@ class GrainsSolver {
   // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
   // it searched none (no contacts and no clumping). Valid until the next substep.
   const NeighborList* candidates() const { return candidates_on_ ? &neighbors_ : nullptr; }
+  // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
+  // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
+  // until the next substep
+  opencl::SequentialContacts contact_sweep();
 
  private:
   bool candidates_on_ = false;
@@ -266,6 +275,16 @@ class GrainsSolver {
   std::vector<uint32_t> block_link_start_, block_link_to_;
   std::vector<int32_t> block_colour_;
   void colour_blocks();
+  // each block's contacts in waves that share no moving grain (order_waves): block b's waves
+  // are block_wave_[b] to block_wave_[b + 1], wave w's contacts seq_[wave_start_[w],
+  // wave_start_[w + 1])
+  std::vector<uint32_t> block_wave_, wave_start_;
+  std::vector<uint64_t> wave_marks_;                // 2 a grain: the waves 0-127 it is in
+  std::vector<std::vector<uint32_t>> block_waves_;  // a block's waves' starts within it
+  std::vector<SeqContact> wave_block_;              // a block's contacts, a copy per thread
+  std::vector<uint32_t> wave_of_;                   // their waves
+  bool seq_waves_ = false;                          // seq_ is in waves
+  void order_waves(int threads, bool waves);
   // seq_ and its blocks are kept for the next substep when everything they were built from is
   // the same (seq_list_kept): the neighbour rows (kept by keep_rows), the collider planes, and
   // each grain's inverse mass, repulsion scale and friction (seq_grain_, 3 a grain; this
@@ -291,8 +310,6 @@ class GrainsSolver {
   std::vector<uint32_t> load_of_;
   std::vector<float> carried_move_;
   std::vector<uint8_t> loaded_;  // use_opencl: 1 for a contact with a carried load
-  // seq_ and its blocks and colours as opencl::Iterations takes them
-  opencl::SequentialContacts device_contacts();
   // the warm start's per-contact and per-grain working arrays, kept between substeps
   std::vector<float> warm_factor_, warm_balance_;
   std::vector<float> warm_normal_, warm_repeat_, warm_external_;  // 3 a contact, 3 a grain

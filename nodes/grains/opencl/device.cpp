@@ -151,10 +151,25 @@ bool buffer_cap(uint64_t* bytes, std::string* problem) {
   return true;
 }
 
+bool sweep_items(uint64_t* items, std::string* problem) {
+  *items = 0;
+  const char* text = std::getenv("GRAINS_OPENCL_SWEEP_ITEMS");
+  if (!text || !*text) return true;
+  char* end = nullptr;
+  const long long v = std::strtoll(text, &end, 10);
+  if (*end != '\0' || v < 1 || v > 1024) {
+    *problem = std::string("GRAINS_OPENCL_SWEEP_ITEMS: '") + text +
+               "' is not a whole number from 1 to 1024";
+    return false;
+  }
+  *items = static_cast<uint64_t>(v);
+  return true;
+}
+
 bool chosen_device(DeviceChoice* out, std::string* problem) {
   *out = DeviceChoice{};
-  uint64_t cap = 0;
-  if (!buffer_cap(&cap, problem)) return false;
+  uint64_t cap = 0, items = 0;
+  if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem)) return false;
   const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
   const std::string text = env ? env : "";
   if (!text.empty() && !parse_device_choice(text, out, problem)) {

@@ -47,6 +47,12 @@ bool chosen_device(DeviceChoice* out, std::string* problem);
 // chosen_device() checks it too.
 bool buffer_cap(uint64_t* bytes, std::string* problem);
 
+// GRAINS_OPENCL_SWEEP_ITEMS: the work-items that share each block of gauss_seidel's contacts in
+// a sweep, 1 to 1024 (the result is the same bits for any; opencl/iterations.h). Unset: *items
+// = 0 (the device's kind decides: 1 on a CPU, 64 elsewhere). Malformed: false, *problem says why.
+// chosen_device() checks it too.
+bool sweep_items(uint64_t* items, std::string* problem);
+
 struct BuildResult {
   bool ok = false;
   double seconds = 0;  // wall time of the build

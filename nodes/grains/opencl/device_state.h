@@ -108,7 +108,13 @@ struct Iterations::Impl {
   // holds blocks [part_block[k], part_block[k + 1])
   std::vector<Buffer> seq;
   std::vector<size_t> part_block;
-  Buffer block_start, colour_blocks;
+  // the blocks' waves (block_wave, wave_start) and the colours' blocks
+  Buffer block_wave, wave_start, colour_blocks;
+  // the work-items that share a block in a sweep (GRAINS_OPENCL_SWEEP_ITEMS, or by the device's
+  // kind), and each sweep kernel's own limit (CL_KERNEL_WORK_GROUP_SIZE) once asked
+  size_t sweep_items = 1;
+  std::vector<std::pair<cl_kernel, size_t>> group_limit;
+  cl_device_id device = nullptr;
   // pre-stabilization's start positions, what carried contacts moved, their flags, and the
   // largest move of each block in a pass
   Buffer stable, carried, carried_flag, block_most;
@@ -135,9 +141,9 @@ struct Iterations::Impl {
   ~Impl() {
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
-                      &target, &target_weight, &target_stiffness, &block_start, &colour_blocks,
-                      &stable, &carried, &carried_flag, &block_most, &moved, &moved_part,
-                      &velocity, &repeat, &external, &balance, &cold, &cut})
+                      &target, &target_weight, &target_stiffness, &block_wave, &wave_start,
+                      &colour_blocks, &stable, &carried, &carried_flag, &block_most, &moved,
+                      &moved_part, &velocity, &repeat, &external, &balance, &cold, &cut})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -186,8 +192,10 @@ struct Iterations::Impl {
     static constexpr cl_uint kNoArg = ~cl_uint(0);
     cl_uint seq, first, count, base;
     cl_uint normal = kNoArg, factor = kNoArg;  // the part's normal and factor buffers, if taken
+    cl_uint local_floats = kNoArg;             // a __local float a work-item, if taken
   };
-  // launches k (a work-item a block) over each part of colour c's blocks
+  // launches k (a work-group a block, of sweep_items work-items or k's limit) over each part of
+  // colour c's blocks
   void sweep_colour(cl_kernel k, PartArgs at, const SequentialContacts& s, size_t c);
   // s's contacts from the device (after upload_contacts)
   void download_contacts(const SequentialContacts& s);

@@ -106,17 +106,26 @@ __kernel void gr_k_friction(gr_params prm, GR_GRAINS_ARGS, __global const float*
   gr_store3(next, i, gr_friction_pass(&g, &prm, p, &acc, i));
 }
 
-/* work-item t's block of a colour's sweep, blocks[first + t] (count in all): its contacts
- * [*begin, *end); 0 for a work-item past the colour's blocks */
-GR_INLINE int gr_sweep_block(int t, int first, int count, __global const gr_uint* blocks,
-                             __global const gr_uint* block_start, gr_uint* begin, gr_uint* end) {
+/* A colour's sweep: work-group t sweeps block blocks[first + t] (count in all), its waves
+ * [*begin, *end) (GrainsSolver::order_waves) one after another, the group's work-items sharing
+ * out each wave's contacts (GR_WAVE) and meeting at a barrier after it. No two contacts of a
+ * wave move one grain, so the result is the CPU's sweep's whatever the group's size and
+ * schedule. 0 for a work-group past the colour's blocks (the whole group returns). */
+GR_INLINE int gr_sweep_block(int first, int count, __global const gr_uint* blocks,
+                             __global const gr_uint* block_wave, gr_uint* begin, gr_uint* end) {
+  const int t = (int)get_group_id(0);
   gr_uint b;
   if (t >= count) return 0;
   b = blocks[first + t];
-  *begin = block_start[b];
-  *end = block_start[b + 1];
+  *begin = block_wave[b];
+  *end = block_wave[b + 1];
   return 1;
 }
+
+/* the contacts k of wave w this work-item takes */
+#define GR_WAVE(k, w, wave_start)                                                  \
+  for (k = wave_start[w] + (gr_uint)get_local_id(0); k < wave_start[(w) + 1];      \
+       k += (gr_uint)get_local_size(0))
 
 /* gauss_seidel's warm start (kernels/warm.h; solve_sequential in opencl/iterations.cpp launches
  * these in gauss_seidel.cpp's order). Per contact, part by part where the contacts are split
@@ -199,24 +208,30 @@ __kernel void gr_k_warm_take_back(gr_params prm, GR_GRAINS_ARGS, __global float*
 /* block sweeps, colour by colour as the passes: each block's contacts in order add their
  * scaled loads to what their grains receive (repeat), or scale and apply them to p (seq, normal
  * and factor the part's, from contact base on) */
-__kernel void gr_k_warm_repeat(__global const gr_seq_contact* seq, __global const gr_uint* block_start,
+__kernel void gr_k_warm_repeat(__global const gr_seq_contact* seq, __global const gr_uint* block_wave,
                                __global const gr_uint* blocks, int first, int count, gr_uint base,
                                __global const float* normal, __global const float* factor,
-                               __global float* repeat) {
-  gr_uint k, e;
-  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
-  for (; k < e; ++k)
+                               __global float* repeat, __global const gr_uint* wave_start) {
+  gr_uint w, we, k;
+  if (!gr_sweep_block(first, count, blocks, block_wave, &w, &we)) return;
+  for (; w < we; ++w) {
+    GR_WAVE(k, w, wave_start)
     gr_warm_repeat(seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base], repeat);
+    barrier(CLK_GLOBAL_MEM_FENCE);
+  }
 }
 
 __kernel void gr_k_warm_apply(__global float* p, __global gr_seq_contact* seq,
-                              __global const gr_uint* block_start, __global const gr_uint* blocks,
+                              __global const gr_uint* block_wave, __global const gr_uint* blocks,
                               int first, int count, gr_uint base, __global const float* normal,
-                              __global const float* factor) {
-  gr_uint k, e;
-  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
-  for (; k < e; ++k)
+                              __global const float* factor, __global const gr_uint* wave_start) {
+  gr_uint w, we, k;
+  if (!gr_sweep_block(first, count, blocks, block_wave, &w, &we)) return;
+  for (; w < we; ++w) {
+    GR_WAVE(k, w, wave_start)
     gr_warm_apply(p, seq + (k - base), normal + 3 * (size_t)(k - base), factor[k - base]);
+    barrier(CLK_GLOBAL_MEM_FENCE);
+  }
 }
 
 /* one pass of the Jacobi path's pre-stabilization: next = gr_stabilize(x), and each grain's
@@ -257,42 +272,57 @@ __kernel void gr_k_pin(gr_params prm, __global const float* targetP,
   gr_store3(p, i, gr_project_pin(&g, &prm, p, i));
 }
 
-/* contact_solver gauss_seidel's pass over one colour of blocks (gauss_seidel.cpp): work-item t
- * sweeps block blocks[first + t]'s contacts in their order, in place (gr_seq_pass, the CPU's
- * pass); no two blocks of a colour write one grain, so the result is the CPU's order's whatever
- * the device's schedule. seq holds the contacts from number base on (the host's parts) */
+/* contact_solver gauss_seidel's pass over one colour of blocks (gauss_seidel.cpp): work-group t
+ * sweeps block blocks[first + t]'s contacts wave by wave, in place (gr_seq_pass, the CPU's
+ * pass); no two blocks of a colour write one grain, nor two contacts of a wave, so the result is
+ * the CPU's order's whatever the device's schedule. seq holds the contacts from number base on
+ * (the host's parts) */
 __kernel void gr_k_sequential(gr_params prm, GR_GRAINS_ARGS, __global float* p,
-                              __global gr_seq_contact* seq, __global const gr_uint* block_start,
+                              __global gr_seq_contact* seq, __global const gr_uint* block_wave,
                               __global const gr_uint* blocks, int first, int count, float relax,
-                              gr_uint base) {
-  gr_uint k, e;
-  if (!gr_sweep_block((int)get_global_id(0), first, count, blocks, block_start, &k, &e)) return;
+                              gr_uint base, __global const gr_uint* wave_start) {
+  gr_uint w, we, k;
+  if (!gr_sweep_block(first, count, blocks, block_wave, &w, &we)) return;
   {
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    for (; k < e; ++k) gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
+    for (; w < we; ++w) {
+      GR_WAVE(k, w, wave_start)
+      gr_seq_pass(&g, &prm, p, seq + (k - base), relax);
+      barrier(CLK_GLOBAL_MEM_FENCE);
+    }
   }
 }
 
 /* contact_solver gauss_seidel's pre-stabilization over one colour of blocks, as gr_k_sequential
- * sweeps them: work-item t sweeps block blocks[first + t] (gr_seq_stabilize) and writes the
- * largest move it made to most[block]; a contact flagged in carried_flag (null: none) also adds
- * its moves to carried */
+ * sweeps them (gr_seq_stabilize), writing the largest move the group made to most[block]
+ * (through `part`, a float a work-item: a maximum does not depend on the order it is taken in);
+ * a contact flagged in carried_flag (null: none) also adds its moves to carried */
 __kernel void gr_k_stabilize(gr_params prm, GR_GRAINS_ARGS, __global float* x, __global float* p,
                              __global float* carried, __global const uchar* carried_flag,
-                             __global const gr_seq_contact* seq, __global const gr_uint* block_start,
+                             __global const gr_seq_contact* seq, __global const gr_uint* block_wave,
                              __global const gr_uint* blocks, int first, int count, gr_uint base,
-                             __global float* most) {
-  const int t = (int)get_global_id(0);
-  gr_uint k, e;
+                             __global float* most, __global const gr_uint* wave_start,
+                             __local float* part) {
+  const int lid = (int)get_local_id(0), items = (int)get_local_size(0);
+  gr_uint w, we, k;
   float largest = 0.0f, moved;
-  if (!gr_sweep_block(t, first, count, blocks, block_start, &k, &e)) return;
+  int h;
+  if (!gr_sweep_block(first, count, blocks, block_wave, &w, &we)) return;
   {
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    for (; k < e; ++k) {
-      moved = gr_seq_stabilize(&g, x, p, carried_flag && carried_flag[k] ? carried : 0, seq + (k - base));
-      largest = moved > largest ? moved : largest;
+    for (; w < we; ++w) {
+      GR_WAVE(k, w, wave_start) {
+        moved = gr_seq_stabilize(&g, x, p, carried_flag && carried_flag[k] ? carried : 0, seq + (k - base));
+        largest = moved > largest ? moved : largest;
+      }
+      barrier(CLK_GLOBAL_MEM_FENCE);
     }
-    most[blocks[first + t]] = largest;
+  }
+  part[lid] = largest;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  if (lid == 0) {
+    for (h = 1; h < items; ++h) largest = part[h] > largest ? part[h] : largest;
+    most[blocks[first + (int)get_group_id(0)]] = largest;
   }
 }
 

@@ -73,6 +73,18 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
   uint64_t cap = 0;
   if (!buffer_cap(&cap, &problem)) throw std::runtime_error("use_opencl: " + problem);
   if (cap > 0) impl_->largest = std::min(impl_->largest, static_cast<size_t>(cap));
+  // a block's waves shared among work-items: on a CPU one work-item sweeps its block (a core
+  // gains nothing from splitting a wave), a GPU's many lanes take a wave's contacts at once
+  uint64_t items = 0;
+  if (!sweep_items(&items, &problem)) throw std::runtime_error("use_opencl: " + problem);
+  if (items == 0) {
+    cl_device_type type = 0;
+    check(clGetDeviceInfo(d, CL_DEVICE_TYPE, sizeof type, &type, nullptr),
+          "clGetDeviceInfo(CL_DEVICE_TYPE)");
+    items = (type & CL_DEVICE_TYPE_CPU) ? 1 : 64;
+  }
+  impl_->sweep_items = static_cast<size_t>(items);
+  impl_->device = d;
   cl_int status = CL_SUCCESS;
   impl_->ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
   check(status, "clCreateContext");
@@ -99,6 +111,10 @@ Iterations::~Iterations() = default;
 
 const std::string& Iterations::device_name() const {
   return impl_->name;
+}
+
+bool Iterations::shares_blocks() const {
+  return impl_->sweep_items > 1;
 }
 
 void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& size,
@@ -226,15 +242,28 @@ void Iterations::Impl::upload_contacts(const SequentialContacts& s) {
                  count = s.block_start[part_block[k + 1]] - first;
     upload(seq[k], s.contacts + first, count * per);
   }
-  upload(block_start, s.block_start, (s.blocks + 1) * u);
+  upload(block_wave, s.block_wave, (s.blocks + 1) * u);
+  upload(wave_start, s.wave_start, (s.waves + 1) * u);
   upload(colour_blocks, s.colour_blocks, s.blocks * u);
 }
 
 void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialContacts& s,
                                     size_t c) {
   // a work-group a block: a device spreads work-groups over its compute units (PoCL runs a
-  // work-group on one core), and a colour has few blocks
-  const size_t local = 1;
+  // work-group on one core), and a colour has few blocks; its work-items share each wave
+  size_t local = 0;
+  for (const auto& [kernel, limit] : group_limit)
+    if (kernel == k) local = limit;
+  if (local == 0) {
+    size_t limit = 1;
+    check(clGetKernelWorkGroupInfo(k, device, CL_KERNEL_WORK_GROUP_SIZE, sizeof limit, &limit,
+                                   nullptr),
+          "clGetKernelWorkGroupInfo");
+    local = std::max<size_t>(1, std::min(sweep_items, limit));
+    group_limit.emplace_back(k, local);
+  }
+  if (at.local_floats != PartArgs::kNoArg)
+    check(clSetKernelArg(k, at.local_floats, local * sizeof(float), nullptr), "clSetKernelArg");
   for (size_t part = 0; part + 1 < part_block.size(); ++part) {
     // the colour's blocks (ascending) that lie in this part; blocks of one colour touch no
     // common grain, so sweeping them part by part gives what one launch would
@@ -253,7 +282,7 @@ void Iterations::Impl::sweep_colour(cl_kernel k, PartArgs at, const SequentialCo
     check(clSetKernelArg(k, at.first, sizeof(int), &first), "clSetKernelArg");
     check(clSetKernelArg(k, at.count, sizeof(int), &count), "clSetKernelArg");
     check(clSetKernelArg(k, at.base, sizeof(gr_uint), &base), "clSetKernelArg");
-    const size_t items = static_cast<size_t>(count);
+    const size_t items = static_cast<size_t>(count) * local;
     check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &items, &local, 0, nullptr, nullptr),
           "clEnqueueNDRangeKernel");
   }
@@ -298,12 +327,13 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
       else set_buffer(others, a, nullptr);
     check(clSetKernelArg(others, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
   }
-  // the contacts: p, seq, block_start, blocks, first, count, relax, base (seq, first, count and
-  // base by colour and part)
+  // the contacts: p, seq, block_wave, blocks, first, count, relax, base, wave_start (seq, first,
+  // count and base by colour and part)
   set_grains(sequential, prm, g, inputs);
-  set_buffer(sequential, kFirstOwn + 2, &block_start);
+  set_buffer(sequential, kFirstOwn + 2, &block_wave);
   set_buffer(sequential, kFirstOwn + 3, &colour_blocks);
   check(clSetKernelArg(sequential, kFirstOwn + 6, sizeof(float), &s.relax), "clSetKernelArg");
+  set_buffer(sequential, kFirstOwn + 8, &wave_start);
   const PartArgs at{kFirstOwn + 1, kFirstOwn + 4, kFirstOwn + 5, kFirstOwn + 7};
   const bool pins = g.targetP && g.targetstiffness;
   if (pins) set_pins(g, prm, n);
@@ -415,8 +445,8 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   const bool contacts = s.count > 0;
   if (contacts && w.loaded) m.upload(m.carried_flag, w.loaded, s.count);
 
-  // pre-stabilization: x, p, carried, carried_flag, seq, block_start, blocks, first, count, base,
-  // most
+  // pre-stabilization: x, p, carried, carried_flag, seq, block_wave, blocks, first, count, base,
+  // most, wave_start, part
   if (w.x) {
     m.upload(m.stable, w.x, (3 * n + 1) * f);
     m.upload(m.carried, w.carried, 3 * n * f);
@@ -428,10 +458,12 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       set_buffer(k, kFirstOwn + 1, &m.p);
       set_buffer(k, kFirstOwn + 2, w.carried ? &m.carried : nullptr);
       set_buffer(k, kFirstOwn + 3, w.carried && w.loaded ? &m.carried_flag : nullptr);
-      set_buffer(k, kFirstOwn + 5, &m.block_start);
+      set_buffer(k, kFirstOwn + 5, &m.block_wave);
       set_buffer(k, kFirstOwn + 6, &m.colour_blocks);
       set_buffer(k, kFirstOwn + 10, &m.block_most);
-      const Impl::PartArgs at{kFirstOwn + 4, kFirstOwn + 7, kFirstOwn + 8, kFirstOwn + 9};
+      set_buffer(k, kFirstOwn + 11, &m.wave_start);
+      Impl::PartArgs at{kFirstOwn + 4, kFirstOwn + 7, kFirstOwn + 8, kFirstOwn + 9};
+      at.local_floats = kFirstOwn + 12;
       std::vector<float> block_most(s.blocks);
       for (int pass = 0; pass < w.most; ++pass) {
         for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(k, at, s, c);
@@ -487,12 +519,13 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     set_buffer(open, kFirstOwn, &m.p);
     set_buffer(open, kFirstOwn + 4, &m.carried_flag);
     m.each_part(open, kFirstOwn + 1, s, kFirstOwn + 5, kFirstOwn + 6);
-    // what the scaled loads give each grain: seq, block_start, blocks, first, count, base,
-    // normal, factor, repeat
+    // what the scaled loads give each grain: seq, block_wave, blocks, first, count, base,
+    // normal, factor, repeat, wave_start
     cl_kernel repeat = m.kernel(m.warm_repeat, "gr_k_warm_repeat");
-    set_buffer(repeat, 1, &m.block_start);
+    set_buffer(repeat, 1, &m.block_wave);
     set_buffer(repeat, 2, &m.colour_blocks);
     set_buffer(repeat, 8, &m.repeat);
+    set_buffer(repeat, 9, &m.wave_start);
     auto sum_repeat = [&] {
       const float zero = 0.0f;
       check(clEnqueueFillBuffer(m.queue, m.repeat.mem, &zero, f, 0, 3 * n * f, 0, nullptr, nullptr),
@@ -534,12 +567,13 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       m.each_part(cut, 0, s, Impl::PartArgs::kNoArg, 4);
       m.download(m.cut, &any, sizeof any);
     }
-    // the loads scaled and applied: p, seq, block_start, blocks, first, count, base, normal,
-    // factor
+    // the loads scaled and applied: p, seq, block_wave, blocks, first, count, base, normal,
+    // factor, wave_start
     cl_kernel apply = m.kernel(m.warm_apply, "gr_k_warm_apply");
     set_buffer(apply, 0, &m.p);
-    set_buffer(apply, 2, &m.block_start);
+    set_buffer(apply, 2, &m.block_wave);
     set_buffer(apply, 3, &m.colour_blocks);
+    set_buffer(apply, 9, &m.wave_start);
     for (size_t c = 0; c < s.colours; ++c) m.sweep_colour(apply, Impl::PartArgs{1, 4, 5, 6, 7, 8}, s, c);
   }
 

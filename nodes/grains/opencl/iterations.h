@@ -7,8 +7,9 @@
 // velocity, final collisions, history, strain) and hands each call its inputs. The kernels call
 // the functions the CPU loops call (kernels/, engine/pair_test.h; opencl/grains.cl). Each
 // per-grain work-item writes only its own grain and sums in row order; each Gauss-Seidel
-// work-item sweeps one block of contacts in order, no two blocks at once writing one grain;
-// integer atomics only count: a device gives the same result run to run.
+// work-group sweeps one block of contacts wave by wave, its work-items sharing a wave, no two
+// blocks at once and no two contacts of a wave writing one grain; integer atomics only count: a
+// device gives the same result run to run, the CPU's sweep's in the same order.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -32,10 +33,13 @@ struct IterationSizes {
   size_t row_length = 0;  // floats of one grain's overlap row (whole blocks of GR_LANES)
 };
 
-// contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks):
-// block b's contacts are contacts[block_start[b], block_start[b + 1]), colour c's blocks
-// colour_blocks[colour_start[c], colour_start[c + 1]); `others` (with others_prm) the explicit
-// constraints and clumping, one Jacobi group before each pass, null when there are none
+// contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
+// and waves (GrainsSolver::order_waves): block b's contacts are contacts[block_start[b],
+// block_start[b + 1]), colour c's blocks colour_blocks[colour_start[c], colour_start[c + 1]);
+// block b's waves are block_wave[b] to block_wave[b + 1], wave w's contacts
+// contacts[wave_start[w], wave_start[w + 1]), no two of them moving one grain; `others` (with
+// others_prm) the explicit constraints and clumping, one Jacobi group before each pass, null
+// when there are none
 struct SequentialContacts {
   gr_seq_contact* contacts = nullptr;  // in and out: each contact's loads
   size_t count = 0;
@@ -44,6 +48,9 @@ struct SequentialContacts {
   const gr_uint* colour_blocks = nullptr;
   const gr_uint* colour_start = nullptr;
   size_t colours = 0;
+  const gr_uint* block_wave = nullptr;
+  const gr_uint* wave_start = nullptr;
+  size_t waves = 0;
   float relax = 1.0f;  // over_relaxation
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;
@@ -112,6 +119,10 @@ class Iterations {
                         int iterations);
 
   const std::string& device_name() const;
+  // whether a block's contacts are shared among several work-items (GRAINS_OPENCL_SWEEP_ITEMS,
+  // or a device that is not a CPU): the contacts must then come in waves (GrainsSettings::
+  // sweep_waves)
+  bool shares_blocks() const;
 
  private:
   struct Impl;

@@ -1,11 +1,11 @@
 // Physics tests of the grains PBD solver (DESIGN §4, the POP Grains help page). Each test states
 // the law or closed form it checks and derives its tolerance from the physics of the scheme.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cstring>
 
 #include "engine/geometry_io.h"
+#include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
 
 using namespace grains;
@@ -429,6 +429,62 @@ TEST_CASE("with the contacts one at a time, blocks swept at once give what one t
   // colour's blocks shared out among 2 and 3 threads; the warm start's sums and the sweeps'
   // largest move reduced across them
   check_threads([](GrainsSettings& s) { s.contact_solver = kContactGaussSeidel; }, 16, {2, 3});
+}
+
+TEST_CASE(
+    "with the contacts one at a time, a block's contacts come in waves that move no grain twice",
+    "[grains][gauss_seidel]") {
+  // gauss_seidel.cpp (order_waves): with sweep_waves (a device whose work-items share a block)
+  // each block's contacts are ordered in waves, no two contacts of a wave moving one grain, so
+  // that a device may project a wave's contacts at once and get the sweep's bits. A jittered block
+  // of 16 x 8 x 16 grains (two blocks of 1,024) settles on the ground for 24 substeps at 2 x 10.
+  // Greedy colouring puts a contact in one of at most z_i + z_j - 1 waves (z a moving grain's
+  // contacts in the block): the waves a block has are bounded by twice the most contacts any grain
+  // has, less one, however many grains it holds.
+  Scene sc;
+  sc.s = settings(24, 2, 10);
+  sc.s.contact_solver = kContactGaussSeidel;
+  sc.s.sweep_waves = true;
+  sc.add_collider(ground());
+  sc.add_jittered_block(16, 8, 16, 0.01f);
+  for (int k = 0; k < 24; ++k) sc.substep();
+  const opencl::SequentialContacts on = sc.solver.contact_sweep();
+  REQUIRE(on.blocks == 2);
+  std::vector<int> last(sc.size(), -1);  // the wave a grain was last moved in
+  size_t waves = 0;
+  for (size_t b = 0; b < on.blocks; ++b) {
+    INFO("block " << b);
+    std::vector<int> in_block(sc.size(), 0);
+    for (gr_uint k = on.block_start[b]; k < on.block_start[b + 1]; ++k) {
+      const gr_seq_contact& q = on.contacts[k];
+      CHECK(static_cast<size_t>(q.i) / 1024 == b);  // a contact belongs to its lower index's block
+      if (q.moves & 1u) ++in_block[q.i];
+      if (q.moves & 2u) ++in_block[q.j];
+    }
+    const int z = *std::max_element(in_block.begin(), in_block.end());
+    const gr_uint w0 = on.block_wave[b], w1 = on.block_wave[b + 1];
+    REQUIRE(w1 > w0);
+    CHECK(on.wave_start[w0] == on.block_start[b]);
+    CHECK(on.wave_start[w1] == on.block_start[b + 1]);
+    INFO(on.block_start[b + 1] - on.block_start[b] << " contacts, at most " << z << " a grain, in "
+                                                   << w1 - w0 << " waves");
+    CHECK(on.block_start[b + 1] - on.block_start[b] > 4 * 1024u);  // a packing: the premise
+    CHECK(static_cast<int>(w1 - w0) <= 2 * z - 1);
+    for (gr_uint w = w0; w < w1; ++w) {
+      CHECK(on.wave_start[w + 1] > on.wave_start[w]);  // no empty wave
+      for (gr_uint k = on.wave_start[w]; k < on.wave_start[w + 1]; ++k) {
+        const gr_seq_contact& q = on.contacts[k];
+        for (int h = 0; h < 2; ++h) {
+          if (!(q.moves & (1u << h))) continue;
+          const int x = h ? q.j : q.i;
+          CHECK(last[x] != static_cast<int>(w));  // moved once in a wave at most
+          last[x] = static_cast<int>(w);
+        }
+      }
+    }
+    waves += w1 - w0;
+  }
+  CHECK(on.waves == waves);
 }
 
 TEST_CASE("with the contacts one at a time, a contact list kept across substeps gives what rebuilding it gives",

@@ -171,28 +171,44 @@ TEST_CASE("use_opencl: a gauss_seidel substep agrees with the CPU path's within 
   }
   INFO("deepest overlap " << m.deepest << " m, fastest " << m.fastest << " m/s: overlap / distance at most "
                           << m.stretch << "; at most " << z << " contacts a grain");
-  // touching: within a thousandth of a diameter (rigid contacts end at 2 r, not inside it)
-  const Apart a = one_substep_apart(packed, 2.002f * r);
-  const int S = packed.s.constraint_iterations + a.stabilize + 1;
-  const double bound = z * S * 4 * std::ldexp(m.reach, -24) * std::pow(1 + m.stretch, z * S);
-  INFO("largest difference " << a.worst << " m; " << a.touching << " touching pairs; " << a.stabilize
-                             << " pre-stabilization passes; bound " << bound << " m");
-  CHECK(a.touching > 800);  // a packing, not a gas
-  CHECK(a.worst <= bound);
+  // touching: within a thousandth of a diameter (rigid contacts end at 2 r, not inside it).
+  // Both sweep orders: by lower index (one work-item a block, PoCL's), and in waves with 64
+  // work-items a block (a GPU's), the CPU path then sweeping the waves too (sweep_waves)
+  for (const bool waves : {false, true}) {
+    test::ScopedEnv items("GRAINS_OPENCL_SWEEP_ITEMS", waves ? "64" : "1");
+    packed.s.sweep_waves = waves;
+    const Apart a = one_substep_apart(packed, 2.002f * r);
+    const int S = packed.s.constraint_iterations + a.stabilize + 1;
+    const double bound = z * S * 4 * std::ldexp(m.reach, -24) * std::pow(1 + m.stretch, z * S);
+    INFO("waves " << waves << ": largest difference " << a.worst << " m; " << a.touching
+                  << " touching pairs; " << a.stabilize << " pre-stabilization passes; bound "
+                  << bound << " m");
+    CHECK(a.touching > 800);  // a packing, not a gas
+    CHECK(a.worst <= bound);
+  }
 }
 
-TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give the same bits",
-          "[opencl][gauss_seidel]") {
+TEST_CASE(
+    "use_opencl: gauss_seidel's contacts split over device buffers, or a block's waves over "
+    "work-items, give the same bits",
+    "[opencl][gauss_seidel]") {
   // One device buffer holds at most CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL: 4 GiB, 77 million
   // contacts of 56 bytes: ten million grains need more), so the contacts go to the device in
   // parts of whole blocks, each colour's blocks swept part by part. No two blocks of a colour
-  // write one grain, so the parts give the bits one buffer gives. A jittered block of 10,240
-  // grains (ten blocks of 1,024) drops onto the ground for 12 substeps, with every part at most
-  // 1 MiB (GRAINS_OPENCL_MAX_BUFFER_MIB=1: 18,724 contacts) and without the cap.
+  // write one grain, so the parts give the bits one buffer gives. With several work-items a
+  // block (GRAINS_OPENCL_SWEEP_ITEMS) the contacts come in waves and the items share each wave's
+  // contacts (no two of a wave move one grain), which gives the bits of any other count of
+  // items. A jittered block of 10,240 grains (ten blocks of 1,024) drops onto the ground for 12
+  // substeps, with every part at most 1 MiB (GRAINS_OPENCL_MAX_BUFFER_MIB=1: 18,724 contacts)
+  // and without the cap: one item a block (the order by lower index), and 7 and 64 items (the
+  // waves). (PoCL runs a work-group's items one after another between barriers: this checks
+  // which contacts each item takes and the barriers' places, not a GPU's lanes racing; the
+  // waves' own test is "... a block's contacts come in waves that move no grain twice".)
   const float r = 0.01f;
-  auto drop = [&](bool capped) {
+  auto drop = [&](bool capped, const char* items) {
     std::unique_ptr<test::ScopedEnv> cap;
     if (capped) cap = std::make_unique<test::ScopedEnv>("GRAINS_OPENCL_MAX_BUFFER_MIB", "1");
+    test::ScopedEnv sweep("GRAINS_OPENCL_SWEEP_ITEMS", items);
     test::Scene s;
     s.add_collider(test::ground());
     s.add_jittered_block(40, 16, 16, r);
@@ -201,7 +217,7 @@ TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give th
     for (int k = 0; k < 12; ++k) s.substep();
     return s;
   };
-  const test::Scene whole = drop(false), parts = drop(true);
+  const test::Scene whole = drop(false, "1"), waves = drop(false, "7");
   REQUIRE(whole.s.contact_solver == kContactGaussSeidel);
   // the premise: more contacts than one part holds (every touching pair is a contact)
   size_t touching = 0;
@@ -209,8 +225,16 @@ TEST_CASE("use_opencl: gauss_seidel's contacts split over device buffers give th
     for (size_t j = i + 1; j < whole.size(); ++j) touching += length(whole.pos(i) - whole.pos(j)) < 2.002f * r;
   INFO(touching << " touching pairs");
   REQUIRE(touching * sizeof(gr_seq_contact) > (size_t(1) << 20));
-  CHECK(whole.P == parts.P);
-  CHECK(whole.v == parts.v);
+  for (const auto& [capped, items] :
+       {std::pair{true, "1"}, {true, "7"}, {false, "64"}, {true, "64"}}) {
+    INFO("parts of 1 MiB: " << capped << "; work-items a block: " << items);
+    const test::Scene other = drop(capped, items),
+                      &same = std::string(items) == "1" ? whole : waves;
+    CHECK(same.P == other.P);
+    CHECK(same.v == other.v);
+  }
+  // the two orders are two sweeps, not the same bits
+  CHECK(whole.P != waves.P);
 }
 
 TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's largest is refused",
@@ -230,10 +254,11 @@ TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's la
 
 TEST_CASE("use_opencl: the same graph gives the same frames run to run", "[opencl]") {
   // A Jacobi work-item writes only its own grain's outputs and sums its contacts in row order;
-  // a Gauss-Seidel work-item sweeps one block of contacts in order, and no two blocks swept at
-  // once write one grain: the device's result does not depend on how it schedules them, and
-  // the host's part of the substep is the CPU path's, the same for any thread count. sand_pile
-  // with friction, 6 frames, with one host thread and with two: the same bits, on both solvers.
+  // a Gauss-Seidel work-group sweeps one block of contacts wave by wave, and no two blocks swept
+  // at once, nor two contacts of a wave, write one grain: the device's result does not depend on
+  // how it schedules them, and the host's part of the substep is the CPU path's, the same for any
+  // thread count. sand_pile with friction, 6 frames, with one host thread and with two: the same
+  // bits, on both solvers.
   for (const char* solver : {"gauss_seidel", "jacobi"}) {
     INFO(solver);
     const std::string set = std::string("grains.contact_solver=") + solver;
@@ -276,4 +301,8 @@ TEST_CASE("use_opencl without an OpenCL platform, or with a device that is not t
   CHECK(run_with("GRAINS_OPENCL_MAX_BUFFER_MIB", "4GiB", run, log) == 2);
   CHECK_THAT(test::read_text(log), Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_MAX_BUFFER_MIB: '4GiB' is "
                                                    "not a whole number of MiB"));
+  CHECK(run_with("GRAINS_OPENCL_SWEEP_ITEMS", "2048", run, log) == 2);
+  CHECK_THAT(test::read_text(log),
+             Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_SWEEP_ITEMS: '2048' is "
+                             "not a whole number from 1 to 1024"));
 }

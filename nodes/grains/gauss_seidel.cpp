@@ -113,13 +113,20 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const bool waves = c.s.sweep_waves || (c.s.use_opencl && open_device().shares_blocks());
   const bool kept = seq_waves_ == waves && seq_list_kept(c, pairs, grain);
   const bool warm = !seq_loads_.empty() && seq_dt_ > 0.0f;
+  const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
+  std::vector<uint32_t>& load_of = load_of_;
   if (kept) {
     ++seq_lists_kept_;
     // each contact still holds the loads it ended the last substep with, which are what the
     // warm start would find for it by its key: those it would not find (no normal load) start
-    // cold now
-    for (SeqContact& q : seq_)
-      if (!warm || !(q.ln > 0.0f)) q.ln = 0.0f, q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;
+    // cold now, the others with them scaled (gr_seq_keep)
+    if (warm) load_of.resize(seq_.size());
+    const long lm = static_cast<long>(seq_.size());
+#pragma omp parallel for schedule(static) num_threads(c.threads) if (lm >= long(kParallelContacts))
+    for (long k = 0; k < lm; ++k) {
+      const bool carries = gr_seq_keep(&seq_[k], warm, scale);
+      if (warm) load_of[k] = carries ? kLoadInPlace : 0u;
+    }
   } else {
     seq_.clear();
     // room for every candidate before the list is built: growing it by doubling while it is built
@@ -229,33 +236,23 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   };
 
   // each contact's carried load (the warm start's), found once: seq_loads_ index + 1, 0 for none;
-  // with a kept list the contact holds its own (kLoadInPlace). The load, scaled by
+  // with a kept list the contact holds its own (kLoadInPlace, above). The load, scaled by
   // (dt / dt_last)^2, waits in the contact's accumulators for the warm start (pre-stabilization
   // does not read them), which keeps its tangential part across the contact's normal once the
   // pre-stabilized positions are known (gr_warm_open)
-  std::vector<uint32_t>& load_of = load_of_;
-  const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
-  if (warm) {
+  if (warm && !kept) {
     load_of.resize(seq_.size());
     const long lm = static_cast<long>(seq_.size());
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
     for (long k = 0; k < lm; ++k) {
       SeqContact& q = seq_[k];
-      gr_float3 t;
-      if (kept) {
-        load_of[k] = q.ln > 0.0f ? kLoadInPlace : 0u;
-        if (!load_of[k]) continue;
-        q.ln *= scale;
-        t = gr_scale(gr_make3(q.lt[0], q.lt[1], q.lt[2]), scale);
-      } else {
-        const SeqLoad* it = find_load(q.key);
-        load_of[k] = it ? static_cast<uint32_t>(it - seq_loads_.data()) + 1u : 0u;
-        if (!it) continue;
-        // stored on the grain of the lower id
-        const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
-        q.ln = it->ln * scale;
-        t = gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale);
-      }
+      const SeqLoad* it = find_load(q.key);
+      load_of[k] = it ? static_cast<uint32_t>(it - seq_loads_.data()) + 1u : 0u;
+      if (!it) continue;
+      // stored on the grain of the lower id
+      const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
+      q.ln = it->ln * scale;
+      const gr_float3 t = gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale);
       q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
     }
   }
@@ -265,7 +262,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // run on the device in one call, below (opencl/iterations.h: the same steps in the same order)
   opencl::SequentialSolve on_device;
   std::vector<uint8_t>& loaded = loaded_;  // a byte a contact: 1 when it carries a load
-  if (device && warm) {
+  // a kept list that the device's last call left there stays: it keeps its loads there as above
+  const bool resident = device && kept && seq_on_device_;
+  if (device && warm && !resident) {
     loaded.resize(seq_.size());
     for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;
     on_device.loaded = loaded.data();
@@ -424,15 +423,21 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // (opencl/iterations.h); shape matching stays here, so with shapes each pass is a call of
     // its own and the pins follow the shapes here
     opencl::SequentialContacts on = contact_sweep();
+    on.resident = resident;
+    on.keep_warm = warm;
+    on.keep_scale = scale;
     on.relax = relax;
     on.others = other_groups ? &others : nullptr;
     on.others_prm = &others_prm;
     opencl::Iterations& cl = open_device();
-    const opencl::IterationSizes size = device_sizes(c);
+    opencl::IterationSizes size = device_sizes(c);
+    // the contacts' kernels read no neighbour rows: only clumping's Jacobi group does
+    gr_grains gd = g;
+    if (!others.nbr_offsets) gd.nbr_offsets = gd.nbr_indices = nullptr, size.pair_entries = 0;
     if (!c.shapes_on) {
-      cl.solve_sequential(g, prm, size, p_.data(), on, on_device, c.iterations);
+      cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);
     } else {
-      gr_grains unpinned = g;
+      gr_grains unpinned = gd;
       unpinned.targetP = nullptr;
       cl.solve_sequential(unpinned, prm, size, p_.data(), on, on_device, 0);
       for (int it = 0; it < c.iterations; ++it) {
@@ -443,6 +448,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
     p = p_.data();
   }
+  seq_on_device_ = device;
   for (int it = 0; it < c.iterations && !device; ++it) {
     if (other_groups) {
       const long ln = static_cast<long>(n);

@@ -122,6 +122,24 @@ GR_INLINE void gr_seq_pass(const gr_grains* g, const gr_params* prm, GR_GLOBAL f
   gr_seq_apply(p, q, gr_sub(lt, lt0));
 }
 
+/* a contact of a list kept from the last substep (gauss_seidel.cpp) starts with the load it
+ * ended with when there is a warm start and a normal load, scaled by `scale` ((dt / dt_last)^2: a
+ * position-level load is a force x dt^2), else with none. Returns whether it carries a load. */
+GR_INLINE int gr_seq_keep(GR_GLOBAL gr_seq_contact* q, int warm, float scale) {
+  gr_float3 t;
+  if (!warm || !(q->ln > 0.0f)) {
+    q->ln = 0.0f;
+    q->lt[0] = q->lt[1] = q->lt[2] = 0.0f;
+    return 0;
+  }
+  q->ln *= scale;
+  t = gr_scale(gr_make3(q->lt[0], q->lt[1], q->lt[2]), scale);
+  q->lt[0] = t.x;
+  q->lt[1] = t.y;
+  q->lt[2] = t.z;
+  return 1;
+}
+
 /* pre-stabilization of contact q (Macklin et al. 2014 sec. 4.4; gauss_seidel.cpp says when it
  * runs and why): the overlap at the start positions x removed from x and from the predicted
  * positions p alike, without velocity or friction. `carried`, when not null, collects what the

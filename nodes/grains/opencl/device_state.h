@@ -123,6 +123,7 @@ struct Iterations::Impl {
   // grain's velocity, repeated displacement, external step, balance and cold flag
   cl_kernel warm_open = nullptr, warm_factor = nullptr, warm_cut = nullptr, warm_balance = nullptr,
             warm_cold = nullptr, take_back = nullptr, warm_repeat = nullptr, warm_apply = nullptr;
+  cl_kernel keep = nullptr;  // a resident contact list's loads kept (gr_k_keep)
   Buffer velocity, repeat, external, balance, cold, cut;
   std::vector<Buffer> normal, factor;  // by part of the contacts, as seq
   // the Jacobi path's: a pass, and the largest move's parts
@@ -152,7 +153,7 @@ struct Iterations::Impl {
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
-                        warm_apply, stabilize_grains,
+                        warm_apply, keep, stabilize_grains,
                         largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
       if (k) clReleaseKernel(k);

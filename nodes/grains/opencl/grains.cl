@@ -150,6 +150,17 @@ __kernel void gr_k_warm_open(gr_params prm, GR_GRAINS_ARGS, __global const float
   }
 }
 
+/* a kept list's loads where the device holds it (gr_seq_keep): work-item t has contact base + t,
+ * at seq[t]; loaded[base + t] (null: none) says whether it carries one */
+__kernel void gr_k_keep(__global gr_seq_contact* seq, gr_uint base, int count, int warm,
+                        float scale, __global uchar* loaded) {
+  const int t = (int)get_global_id(0);
+  int carries;
+  if (t >= count) return;
+  carries = gr_seq_keep(seq + t, warm, scale);
+  if (loaded) loaded[base + t] = (uchar)carries;
+}
+
 __kernel void gr_k_warm_factor(__global const gr_seq_contact* seq, gr_uint base, int count,
                                __global const float* balance, __global float* factor) {
   const int t = (int)get_global_id(0);

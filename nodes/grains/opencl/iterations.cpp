@@ -441,9 +441,22 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   };
   HostArray inputs[kArrays];
   m.upload_grains(g, size, p, inputs);
-  m.upload_contacts(s);
   const bool contacts = s.count > 0;
-  if (contacts && w.loaded) m.upload(m.carried_flag, w.loaded, s.count);
+  // whether the contacts carry loads (the warm start runs): the host's flags, or with a
+  // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded
+  const bool loaded = s.resident ? s.keep_warm : w.loaded != nullptr;
+  if (!s.resident) {
+    m.upload_contacts(s);
+    if (contacts && loaded) m.upload(m.carried_flag, w.loaded, s.count);
+  } else if (contacts) {
+    if (loaded) m.carried_flag.reserve(m.ctx, s.count, m.largest);
+    cl_kernel keep = m.kernel(m.keep, "gr_k_keep");
+    const int warm = s.keep_warm ? 1 : 0;
+    check(clSetKernelArg(keep, 3, sizeof(int), &warm), "clSetKernelArg");
+    check(clSetKernelArg(keep, 4, sizeof(float), &s.keep_scale), "clSetKernelArg");
+    set_buffer(keep, 5, loaded ? &m.carried_flag : nullptr);
+    m.each_part(keep, 0, s);
+  }
 
   // pre-stabilization: x, p, carried, carried_flag, seq, block_wave, blocks, first, count, base,
   // most, wave_start, part
@@ -457,7 +470,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       set_buffer(k, kFirstOwn, &m.stable);
       set_buffer(k, kFirstOwn + 1, &m.p);
       set_buffer(k, kFirstOwn + 2, w.carried ? &m.carried : nullptr);
-      set_buffer(k, kFirstOwn + 3, w.carried && w.loaded ? &m.carried_flag : nullptr);
+      set_buffer(k, kFirstOwn + 3, w.carried && loaded ? &m.carried_flag : nullptr);
       set_buffer(k, kFirstOwn + 5, &m.block_wave);
       set_buffer(k, kFirstOwn + 6, &m.colour_blocks);
       set_buffer(k, kFirstOwn + 10, &m.block_most);
@@ -476,7 +489,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     }
   }
   // the velocity pre-stabilization takes back: v, p, carried, inv_last, n
-  const bool velocities = w.carried || (contacts && w.loaded);
+  const bool velocities = w.carried || (contacts && loaded);
   if (velocities) m.upload(m.velocity, w.v ? w.v : g.v, 3 * n * f);
   if (w.x && w.carried) {
     cl_kernel k = m.kernel(m.take_back, "gr_k_warm_take_back");
@@ -494,7 +507,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
           "clEnqueueCopyBuffer");
 
   // the warm start, in gauss_seidel.cpp's order
-  if (contacts && w.loaded) {
+  if (contacts && loaded) {
     // each part's normals and factors (3 and 1 floats a contact: within the largest buffer
     // where the part's contacts, 56 bytes each, are)
     const size_t parts = m.part_block.size() - 1;

@@ -51,6 +51,13 @@ struct SequentialContacts {
   const gr_uint* block_wave = nullptr;
   const gr_uint* wave_start = nullptr;
   size_t waves = 0;
+  // resident: the device holds these contacts, blocks and waves as its last call left them
+  // (the host's copy came back from there). solve_sequential() then uploads none of them and
+  // keeps each contact's load there (gr_seq_keep with keep_warm and keep_scale; the loaded
+  // flags are its results, SequentialSolve::loaded is not read)
+  bool resident = false;
+  bool keep_warm = false;
+  float keep_scale = 0.0f;
   float relax = 1.0f;  // over_relaxation
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;

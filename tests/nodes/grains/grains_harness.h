@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/collider.h"
+#include "engine/state_stream.h"
 #include "nodes/grains/solver.h"
 #include "tests/support/support.h"
 
@@ -210,5 +211,36 @@ struct Scene {
           add({x * 2 * r + jitter(), r + y * 2 * r + jitter(), z * 2 * r + jitter()}, r);
   }
 };
+
+// The contact-list tests' scene (gauss_seidel keeps its list while the neighbour rows are kept):
+// 512 grains of radius 0.04 m in layers half a radius apart, a little jittered sideways, fall onto
+// the ground at 8 x 10 for 96 substeps (the fall moves the rows, the rest keeps them), the
+// solver's state written and read back after every substep when `round_trip` (a checkpoint,
+// which drops the list). Returns the scene; *kept is the substeps that kept the list.
+inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept) {
+  Scene sc;
+  sc.s = settings(24, 8, 10);
+  sc.s.contact_solver = kContactGaussSeidel;
+  sc.s.use_opencl = use_opencl;
+  sc.add_collider(ground());
+  Sequence seq;
+  for (int a = 0; a < 8; ++a)
+    for (int b = 0; b < 8; ++b)
+      for (int c = 0; c < 8; ++c)
+        sc.add({0.081f * a + 0.001f * seq.next(), 0.045f + 0.1f * b,
+                0.081f * c + 0.001f * seq.next()},
+               0.04f);
+  for (int k = 0; k < 96; ++k) {
+    sc.substep();
+    if (round_trip) {
+      StateWriter w;
+      sc.solver.save_state(w);
+      StateReader r(w.bytes(), "round trip");
+      sc.solver.load_state(r);
+    }
+  }
+  *kept = sc.solver.contact_lists_kept();
+  return sc;
+}
 
 }  // namespace grains::test

@@ -496,32 +496,9 @@ TEST_CASE("with the contacts one at a time, a contact list kept across substeps 
   // so the second run rebuilds it every substep: both must give the same bits. 512 grains in
   // layers half a radius apart fall onto the ground at 8 x 10: the fall moves the rows
   // (the list is rebuilt, its loads looked up), the rest keeps them.
-  auto run = [](bool round_trip, size_t* kept) {
-    Scene sc;
-    sc.s = settings(24, 8, 10);
-    sc.s.contact_solver = kContactGaussSeidel;
-    sc.add_collider(ground());
-    test::Sequence seq;
-    for (int a = 0; a < 8; ++a)
-      for (int b = 0; b < 8; ++b)
-        for (int c = 0; c < 8; ++c)
-          sc.add({0.081f * a + 0.001f * seq.next(), 0.045f + 0.1f * b, 0.081f * c + 0.001f * seq.next()},
-                 0.04f);
-    for (int k = 0; k < 96; ++k) {
-      sc.substep();
-      if (round_trip) {
-        StateWriter w;
-        sc.solver.save_state(w);
-        StateReader r(w.bytes(), "round trip");
-        sc.solver.load_state(r);
-      }
-    }
-    *kept = sc.solver.contact_lists_kept();
-    return sc.P;
-  };
   size_t kept = 0, rebuilt = 0;
-  const std::vector<float> a = run(false, &kept);
-  const std::vector<float> b = run(true, &rebuilt);
+  const std::vector<float> a = layered_drop(false, false, &kept).P;
+  const std::vector<float> b = layered_drop(false, true, &rebuilt).P;
   INFO("substeps that kept the list: " << kept << " of 96 (round trip: " << rebuilt << ")");
   CHECK(kept >= 48);
   CHECK(kept < 96);

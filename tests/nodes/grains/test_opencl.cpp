@@ -244,33 +244,10 @@ TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding i
   // left there stays on the device: it is not uploaded again, and each contact's load is kept
   // there (gr_k_keep, the host's gr_seq_keep). A state written and read back between substeps
   // drops the list, so that run builds and uploads it every substep: both must give the same
-  // bits. 512 grains in layers half a radius apart fall onto the ground at 8 x 10.
-  auto run = [](bool round_trip, size_t* kept) {
-    test::Scene sc;
-    sc.s = test::settings(24, 8, 10);
-    sc.s.use_opencl = true;
-    sc.add_collider(test::ground());
-    test::Sequence seq;
-    for (int a = 0; a < 8; ++a)
-      for (int b = 0; b < 8; ++b)
-        for (int c = 0; c < 8; ++c)
-          sc.add({0.081f * a + 0.001f * seq.next(), 0.045f + 0.1f * b,
-                  0.081f * c + 0.001f * seq.next()},
-                 0.04f);
-    for (int k = 0; k < 96; ++k) {
-      sc.substep();
-      if (round_trip) {
-        StateWriter w;
-        sc.solver.save_state(w);
-        StateReader r(w.bytes(), "round trip");
-        sc.solver.load_state(r);
-      }
-    }
-    *kept = sc.solver.contact_lists_kept();
-    return sc;
-  };
+  // bits (test::layered_drop: 512 grains fall onto the ground at 8 x 10).
   size_t kept = 0, rebuilt = 0;
-  const test::Scene a = run(false, &kept), b = run(true, &rebuilt);
+  const test::Scene a = test::layered_drop(true, false, &kept),
+                    b = test::layered_drop(true, true, &rebuilt);
   REQUIRE(a.s.contact_solver == kContactGaussSeidel);
   INFO("substeps that kept the list: " << kept << " of 96 (round trip: " << rebuilt << ")");
   CHECK(kept >= 48);

@@ -263,7 +263,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   opencl::SequentialSolve on_device;
   std::vector<uint8_t>& loaded = loaded_;  // a byte a contact: 1 when it carries a load
   // a kept list that the device's last call left there stays: it keeps its loads there as above
-  const bool resident = device && kept && seq_on_device_;
+  const bool resident = device && kept && device_.holds_contacts;
   if (device && warm && !resident) {
     loaded.resize(seq_.size());
     for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;
@@ -448,7 +448,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
     p = p_.data();
   }
-  seq_on_device_ = device;
+  device_.holds_contacts = device;
   for (int it = 0; it < c.iterations && !device; ++it) {
     if (other_groups) {
       const long ln = static_cast<long>(n);

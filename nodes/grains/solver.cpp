@@ -606,6 +606,7 @@ GrainsSolver::DeviceSlot::~DeviceSlot() = default;
 GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot&) {}
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&) {
   device.reset();
+  holds_contacts = false;
   return *this;
 }
 GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;

@@ -217,9 +217,11 @@ class GrainsSolver {
                      int threads);
 
   // the iterations on an OpenCL device (use_opencl), opened at the first substep that asks; a
-  // copy of the solver opens its own
+  // copy of the solver opens its own. holds_contacts: the device holds seq_ as it is, from its
+  // last call (a copy's device holds nothing)
   struct DeviceSlot {
     std::unique_ptr<opencl::Iterations> device;
+    bool holds_contacts = false;
     DeviceSlot();
     ~DeviceSlot();
     DeviceSlot(const DeviceSlot&);
@@ -284,7 +286,6 @@ class GrainsSolver {
   std::vector<SeqContact> wave_block_;              // a block's contacts, a copy per thread
   std::vector<uint32_t> wave_of_;                   // their waves
   bool seq_waves_ = false;                          // seq_ is in waves
-  bool seq_on_device_ = false;  // the OpenCL device holds seq_ as it is, from its last call
   void order_waves(int threads, bool waves);
   // seq_ and its blocks are kept for the next substep when everything they were built from is
   // the same (seq_list_kept): the neighbour rows (kept by keep_rows), the collider planes, and

@@ -256,6 +256,23 @@ TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding i
   CHECK(a.v == b.v);
 }
 
+TEST_CASE("use_opencl: a copy of a solver whose list the device keeps runs on as the original",
+          "[opencl][gauss_seidel]") {
+  // A copy of the solver opens a device of its own, which holds none of the contacts the
+  // original's device keeps: the copy must upload its list, not take the empty device's. The
+  // contact-list scene is copied after its 96 substeps (the last ones kept their list) and both
+  // run 24 more.
+  size_t kept = 0;
+  test::Scene a = test::layered_drop(true, false, &kept);
+  test::Scene b = a;
+  const size_t before = a.solver.contact_lists_kept();
+  for (int k = 0; k < 24; ++k) a.substep(), b.substep();
+  INFO("lists kept in the 24 substeps: " << a.solver.contact_lists_kept() - before);
+  REQUIRE(a.solver.contact_lists_kept() > before);  // the premise: the copy ran on a kept list
+  CHECK(a.P == b.P);
+  CHECK(a.v == b.v);
+}
+
 TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's largest is refused",
           "[opencl][bad]") {
   // A driver need not refuse a buffer over its CL_DEVICE_MAX_MEM_ALLOC_SIZE (PoCL 3.1 took one of

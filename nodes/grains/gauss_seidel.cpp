@@ -112,6 +112,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // in waves for a device whose work-items share a block (order_waves)
   const bool waves = c.s.sweep_waves || (c.s.use_opencl && open_device().shares_blocks());
   const bool kept = seq_waves_ == waves && seq_list_kept(c, pairs, grain);
+  // with use_opencl, a kept list that the device's last call left there stays: the device keeps
+  // its loads (gr_k_keep), and the host's copy, which comes back after the solve, is left as is
+  const bool device = c.s.use_opencl;
+  const bool resident = device && kept && device_.holds_contacts;
   const bool warm = !seq_loads_.empty() && seq_dt_ > 0.0f;
   const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
   std::vector<uint32_t>& load_of = load_of_;
@@ -120,8 +124,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // each contact still holds the loads it ended the last substep with, which are what the
     // warm start would find for it by its key: those it would not find (no normal load) start
     // cold now, the others with them scaled (gr_seq_keep)
-    if (warm) load_of.resize(seq_.size());
-    const long lm = static_cast<long>(seq_.size());
+    if (warm && !resident) load_of.resize(seq_.size());
+    const long lm = resident ? 0 : static_cast<long>(seq_.size());
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (lm >= long(kParallelContacts))
     for (long k = 0; k < lm; ++k) {
       const bool carries = gr_seq_keep(&seq_[k], warm, scale);
@@ -257,13 +261,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
   }
 
-  const bool device = c.s.use_opencl;
   // with use_opencl pre-stabilization, the velocity it takes back, the warm start and the passes
   // run on the device in one call, below (opencl/iterations.h: the same steps in the same order)
   opencl::SequentialSolve on_device;
   std::vector<uint8_t>& loaded = loaded_;  // a byte a contact: 1 when it carries a load
-  // a kept list that the device's last call left there stays: it keeps its loads there as above
-  const bool resident = device && kept && device_.holds_contacts;
   if (device && warm && !resident) {
     loaded.resize(seq_.size());
     for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;

@@ -69,7 +69,6 @@
 namespace grains {
 namespace {
 
-constexpr uint32_t kPlaneKey = 0x80000000u;
 // pre-stabilization stops when its largest move has not fallen at all over 4 passes: grains
 // wedged between sleepers repeated 0.0028 r for 50 passes; converging passes fall, if slowly
 // (1% a pass in the DEM collapse; a column of 100 grains stopped at 0.5% over 4 passes bounced
@@ -96,7 +95,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   float* p = p_.data();
   const float* P = c.g.P;
   const float dt = prm.dt;
-  auto id_of = [&](int i) { return c.d.id ? c.d.id[i] : i; };
 
   // the contacts: each grain pair once (from the lower index's row), then each grain's planes;
   // or the last substep's list, when nothing it was built from has changed (seq_list_kept)
@@ -148,53 +146,15 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         seq_.reserve(most + most / 16);
       }
     }
-    const bool skip_constrained =
-        g.con_offsets && !prm.collide_mutually_constrained_particles && !g.nbr_unconstrained;
+    // grain by grain (gr_seq_build, which a device's build calls too), through a scratch row
+    const int* ids = c.d.id;
+    const int* collider_of = plane_collider_.data();
     for (int i = 0; i < ni; ++i) {
-      const float wi = g.inv_mass[i];
-      if (pairs) {
-        const float ki = gr_repulsion_scale(&g, &prm, i);
-        for (gr_uint e = g.nbr_offsets[i]; e < g.nbr_offsets[i + 1]; ++e) {
-          const int j = static_cast<int>(g.nbr_indices[e]);
-          if (j <= i) continue;
-          const float wj = g.inv_mass[j];
-          if (!(wi + wj > 0.0f)) continue;
-          if (skip_constrained && gr_constrained(&g, i, j)) continue;
-          const float k = 0.5f * (ki + gr_repulsion_scale(&g, &prm, j));
-          if (!(k > 0.0f)) continue;
-          SeqContact q{};
-          q.i = i;
-          q.j = j;
-          q.moves = (wi > 0.0f ? 1u : 0u) | (wj > 0.0f ? 2u : 0u);
-          const uint32_t a = static_cast<uint32_t>(id_of(i)), b = static_cast<uint32_t>(id_of(j));
-          q.key = (uint64_t(std::min(a, b)) << 32) | std::max(a, b);
-          q.k = k;
-          q.share = prm.mass_shock == 2 ? gr_pair_share(&g, &prm, i, j) : wi / (wi + wj);
-          q.mu = prm.friction_with_particles * 0.5f *
-                 (gr_attr(g.friction, i) + gr_attr(g.friction, j));
-          seq_.push_back(q);
-        }
-      }
-      if (g.plane_offsets && wi > 0.0f) {
-        const gr_uint b = g.plane_offsets[i];
-        for (gr_uint e = b; e < g.plane_offsets[i + 1]; ++e) {
-          // a grain may touch several planes of one collider (a box's corner): count them
-          const int32_t collider = plane_collider_[e];
-          uint32_t seen = 0;
-          for (gr_uint f = b; f < e; ++f) seen += plane_collider_[f] == collider;
-          SeqContact q{};
-          q.i = i;
-          q.j = -1;
-          q.e = e;
-          q.moves = 1;
-          q.key = (uint64_t(static_cast<uint32_t>(id_of(i))) << 32) |
-                  (kPlaneKey | (static_cast<uint32_t>(collider) << 2) | std::min(seen, 3u));
-          q.k = 1.0f;
-          q.share = 1.0f;
-          q.mu = prm.friction_with_colliders * gr_attr(g.friction, i);
-          seq_.push_back(q);
-        }
-      }
+      const size_t row = (pairs ? g.nbr_offsets[i + 1] - g.nbr_offsets[i] : 0) +
+                         (g.plane_offsets ? g.plane_offsets[i + 1] - g.plane_offsets[i] : 0);
+      if (seq_row_.size() < row) seq_row_.resize(row);
+      const gr_uint count = gr_seq_build(&g, &prm, ids, collider_of, i, seq_row_.data());
+      seq_.insert(seq_.end(), seq_row_.begin(), seq_row_.begin() + count);
     }
     colour_blocks();
     order_waves(c.threads, waves);
@@ -253,11 +213,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       const SeqLoad* it = find_load(q.key);
       load_of[k] = it ? static_cast<uint32_t>(it - seq_loads_.data()) + 1u : 0u;
       if (!it) continue;
-      // stored on the grain of the lower id
-      const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
-      q.ln = it->ln * scale;
-      const gr_float3 t = gr_scale(gr_make3(it->lt[0], it->lt[1], it->lt[2]), sign * scale);
-      q.lt[0] = t.x, q.lt[1] = t.y, q.lt[2] = t.z;
+      gr_seq_take_load(&q, it->ln, gr_make3(it->lt[0], it->lt[1], it->lt[2]), scale);
     }
   }
 
@@ -501,7 +457,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   }
   for (const SeqContact& q : seq_) {
     if (!(q.ln > 0.0f)) continue;
-    const float sign = q.j >= 0 && id_of(q.i) > id_of(q.j) ? -1.0f : 1.0f;
+    const float sign = gr_seq_carry_sign(&q);
     seq_loads_.push_back({q.key, q.ln, {sign * q.lt[0], sign * q.lt[1], sign * q.lt[2]}});
   }
   index_loads();
@@ -715,12 +671,6 @@ void GrainsSolver::order_waves(int threads, bool waves) {
   wave_start_.back() = static_cast<uint32_t>(seq_.size());
 }
 
-namespace {
-inline size_t load_slot(uint64_t key, int bits) {
-  return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> (64 - bits));
-}
-}  // namespace
-
 void GrainsSolver::index_loads() {
   int bits = 4;
   while ((size_t(1) << bits) < 2 * seq_loads_.size()) ++bits;
@@ -728,7 +678,7 @@ void GrainsSolver::index_loads() {
   seq_table_bits_ = bits;
   const size_t mask = seq_table_.size() - 1;
   for (size_t k = 0; k < seq_loads_.size(); ++k) {
-    size_t h = load_slot(seq_loads_[k].key, bits);
+    size_t h = gr_seq_slot(seq_loads_[k].key, bits);
     while (seq_table_[h]) h = (h + 1) & mask;
     seq_table_[h] = static_cast<uint32_t>(k + 1);
   }
@@ -737,7 +687,7 @@ void GrainsSolver::index_loads() {
 const GrainsSolver::SeqLoad* GrainsSolver::find_load(uint64_t key) const {
   if (seq_table_.empty()) return nullptr;
   const size_t mask = seq_table_.size() - 1;
-  for (size_t h = load_slot(key, seq_table_bits_); seq_table_[h]; h = (h + 1) & mask) {
+  for (size_t h = gr_seq_slot(key, seq_table_bits_); seq_table_[h]; h = (h + 1) & mask) {
     const SeqLoad& l = seq_loads_[seq_table_[h] - 1];
     if (l.key == key) return &l;
   }

@@ -268,6 +268,7 @@ class GrainsSolver {
     float lt[3];
   };
   std::vector<SeqContact> seq_;
+  std::vector<SeqContact> seq_row_;  // one grain's contacts as gr_seq_build writes them
   // seq_ in blocks of grains, the blocks in colours (colour_blocks): block b's contacts are
   // seq_[block_start_[b], block_start_[b + 1]); colour c's blocks are
   // colour_blocks_[colour_start_[c], colour_start_[c + 1]), ascending

@@ -23,6 +23,8 @@
 #define GRAINS_KERNELS_SEQUENTIAL_H
 #include "collider.h"
 #include "contact.h"
+#include "distance.h"
+#include "mass_shock.h"
 
 #ifdef GR_OPENCL
 typedef ulong gr_ulong;
@@ -35,7 +37,9 @@ typedef unsigned long long gr_ulong;
 typedef struct {
   int i, j; /* j < 0: collider plane entry e */
   gr_uint e;
-  gr_uint moves; /* bit 0: i moves (mass > 0), bit 1: j does; a fixed grain is never written */
+  gr_uint moves; /* bit 0: i moves (mass > 0), bit 1: j does (a fixed grain is never written);
+                  * bit 2: i's id is above j's when the list was built (a load is carried
+                  * from the lower id's side, gr_seq_stored_lt) */
   gr_ulong key;  /* who the contact is across substeps (the grains' ids; a plane: its collider) */
   float k;       /* correction scale (repulsion weight x stiffness fraction; planes 1) */
   float share;   /* i's share of a correction, w_i / (w_i + w_j) (planes 1); j takes the rest */
@@ -45,7 +49,7 @@ typedef struct {
 } gr_seq_contact;
 
 /* a[i] += d s */
-GR_INLINE void gr_seq_move(GR_GLOBAL float* a, int i, gr_float3 d, float s) {
+GR_HOT void gr_seq_move(GR_GLOBAL float* a, int i, gr_float3 d, float s) {
   gr_store3(a, i, gr_madd(gr_load3(a, i), d, s));
 }
 
@@ -164,6 +168,105 @@ GR_INLINE float gr_seq_stabilize(const gr_grains* g, GR_GLOBAL float* x, GR_GLOB
     if (carried) gr_seq_move(carried, q->j, d, -(1.0f - q->share));
   }
   return -q->k * C / g->radius[q->i];
+}
+
+/* the key of a plane contact: its grain's id, then the collider and how many of the grain's
+ * planes of that collider came before it (a box's corner: up to 3) */
+#define GR_SEQ_PLANE_KEY 0x80000000u
+
+/* Grain i's contacts, in the list's order (the host builds the list grain by grain in
+ * gauss_seidel.cpp, a device likewise in gr_k_seq_fill): a pair with each grain j > i of i's
+ * row when one of them moves, the pair is not mutually constrained (unless such pairs collide)
+ * and its repulsion scale is positive; then, when i moves, one contact with each of i's
+ * collider plane entries (plane_collider: each entry's collider). id: the grains' ids (null:
+ * their indices), which key each contact across substeps. Written from out (null: counted
+ * only); returns how many. */
+GR_INLINE gr_uint gr_seq_build(const gr_grains* g, const gr_params* prm, const GR_GLOBAL int* id,
+                               const GR_GLOBAL int* plane_collider, int i,
+                               GR_GLOBAL gr_seq_contact* out) {
+  const float wi = g->inv_mass[i];
+  const gr_uint a = (gr_uint)(id ? id[i] : i);
+  const int pairs = g->nbr_offsets && prm->internal_collisions_weight > 0.0f;
+  const int skip_constrained =
+      g->con_offsets && !prm->collide_mutually_constrained_particles && !g->nbr_unconstrained;
+  gr_uint count = 0, e, f;
+  gr_seq_contact q;
+  if (pairs) {
+    const float ki = gr_repulsion_scale(g, prm, i);
+    for (e = g->nbr_offsets[i]; e < g->nbr_offsets[i + 1]; ++e) {
+      const int j = (int)g->nbr_indices[e];
+      float wj, k;
+      gr_uint b;
+      if (j <= i) continue;
+      wj = g->inv_mass[j];
+      if (!(wi + wj > 0.0f)) continue;
+      if (skip_constrained && gr_constrained(g, i, j)) continue;
+      k = 0.5f * (ki + gr_repulsion_scale(g, prm, j));
+      if (!(k > 0.0f)) continue;
+      if (out) {
+        b = (gr_uint)(id ? id[j] : j);
+        q.i = i;
+        q.j = j;
+        q.e = 0u;
+        q.moves = (wi > 0.0f ? 1u : 0u) | (wj > 0.0f ? 2u : 0u) | (a > b ? 4u : 0u);
+        q.key = ((gr_ulong)(a < b ? a : b) << 32) | (gr_ulong)(a < b ? b : a);
+        q.k = k;
+        q.share = prm->mass_shock == 2 ? gr_pair_share(g, prm, i, j) : wi / (wi + wj);
+        q.mu = prm->friction_with_particles * 0.5f *
+               (gr_attr(g->friction, i) + gr_attr(g->friction, j));
+        q.ln = 0.0f;
+        q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;
+        out[count] = q;
+      }
+      ++count;
+    }
+  }
+  if (g->plane_offsets && wi > 0.0f) {
+    const gr_uint first = g->plane_offsets[i];
+    for (e = first; e < g->plane_offsets[i + 1]; ++e) {
+      const int collider = plane_collider[e];
+      gr_uint seen = 0;
+      for (f = first; f < e; ++f) seen += plane_collider[f] == collider ? 1u : 0u;
+      if (out) {
+        q.i = i;
+        q.j = -1;
+        q.e = e;
+        q.moves = 1u;
+        q.key = ((gr_ulong)a << 32) |
+                (gr_ulong)(GR_SEQ_PLANE_KEY | ((gr_uint)collider << 2) | (seen < 3u ? seen : 3u));
+        q.k = 1.0f;
+        q.share = 1.0f;
+        q.mu = prm->friction_with_colliders * gr_attr(g->friction, i);
+        q.ln = 0.0f;
+        q.lt[0] = q.lt[1] = q.lt[2] = 0.0f;
+        out[count] = q;
+      }
+      ++count;
+    }
+  }
+  return count;
+}
+
+/* a contact's tangential load as it is carried to the next substep: from the side of the
+ * grain with the lower id (bit 2 of moves), so that the next list, whose i may be the other
+ * grain, finds it by key whatever order the grains come in */
+GR_INLINE float gr_seq_carry_sign(const GR_GLOBAL gr_seq_contact* q) {
+  return (q->moves & 4u) ? -1.0f : 1.0f;
+}
+
+/* the slot of the open-addressed table of 2^bits slots (bits >= 1) where key's search starts */
+GR_INLINE gr_uint gr_seq_slot(gr_ulong key, int bits) {
+  return (gr_uint)((key * (gr_ulong)0x9E3779B97F4A7C15UL) >> (64 - bits));
+}
+
+/* contact q starts with the load carried under its key (ln and the lower id's side's lt,
+ * gr_seq_carry_sign), scaled by `scale` ((dt / dt_last)^2) */
+GR_INLINE void gr_seq_take_load(GR_GLOBAL gr_seq_contact* q, float ln, gr_float3 lt, float scale) {
+  const gr_float3 t = gr_scale(lt, gr_seq_carry_sign(q) * scale);
+  q->ln = ln * scale;
+  q->lt[0] = t.x;
+  q->lt[1] = t.y;
+  q->lt[2] = t.z;
 }
 
 #endif /* GRAINS_KERNELS_SEQUENTIAL_H */

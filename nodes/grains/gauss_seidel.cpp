@@ -111,11 +111,25 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const bool waves = c.s.sweep_waves || (c.s.use_opencl && open_device().shares_blocks());
   const bool kept = seq_waves_ == waves && seq_list_kept(c, pairs, grain);
   // with use_opencl, a kept list that the device's last call left there stays: the device keeps
-  // its loads (gr_k_keep), and the host's copy, which comes back after the solve, is left as is
+  // its loads (gr_k_keep), and the host's copy is left as is
   const bool device = c.s.use_opencl;
   const bool resident = device && kept && device_.holds_contacts;
-  const bool warm = !seq_loads_.empty() && seq_dt_ > 0.0f;
+  const bool warm = (device_.stale ? device_.loaded > 0 : !seq_loads_.empty()) && seq_dt_ > 0.0f;
   const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
+  // With use_opencl the device builds a new list from the rows and planes it is sent, and finds
+  // each contact's carried load in the list its last solve left (build_sequential: the list this
+  // host would build, bit for bit), so that the list crosses neither way. The host builds it
+  // where the device does not: a list in waves (ordered here), impact data or rigid shapes
+  // (which read it here between passes), loads the device does not hold (a list read back from
+  // a saved state), a list larger than a device buffer.
+  opencl::Iterations::BuiltList built;
+  const bool built_there =
+      device && !kept && !waves && !c.impacts && !c.shapes_on &&
+      (!warm || device_.holds_contacts) && open_device().builds_contacts() &&
+      open_device().build_sequential(g, prm, device_sizes(c), c.d.id,
+                                     g.plane_offsets ? plane_collider_.data() : nullptr, warm,
+                                     scale, kBlockGrains, &built);
+  if (!built_there && !resident) sync_contacts();  // the host's list and loads are read below
   std::vector<uint32_t>& load_of = load_of_;
   if (kept) {
     ++seq_lists_kept_;
@@ -130,33 +144,49 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       if (warm) load_of[k] = carries ? kLoadInPlace : 0u;
     }
   } else {
-    seq_.clear();
-    // room for every candidate before the list is built: growing it by doubling while it is built
-    // holds the old list and the new at once (56 bytes a contact, about nine a grain in a settled
-    // box: 0.5 GB a million grains)
-    {
-      size_t most = 0;
-      if (pairs)
-        for (int i = 0; i < ni; ++i)
-          for (gr_uint e = g.nbr_offsets[i]; e < g.nbr_offsets[i + 1]; ++e)
-            most += int(g.nbr_indices[e]) > i;
-      if (g.plane_offsets) most += g.plane_offsets[n];
-      if (seq_.capacity() < most) {
-        seq_ = std::vector<SeqContact>();  // freed before the larger list is taken
-        seq_.reserve(most + most / 16);
+    if (built_there) {
+      // the blocks' starts and links came back: the colours and the blocks' single waves are
+      // made here as for the host's list
+      ++seq_lists_device_;
+      seq_count_ = built.count;
+      block_start_.swap(built.block_start);
+      block_links_.clear();
+      const size_t blocks = block_start_.size() - 1;
+      for (size_t a = 0; a < blocks; ++a)
+        for (size_t w = 0; w < built.words; ++w)
+          for (uint32_t bits = built.links[a * built.words + w]; bits; bits &= bits - 1)
+            block_links_.push_back((uint64_t(a) << 32) | (32 * w + __builtin_ctz(bits)));
+      colour_linked_blocks();
+    } else {
+      seq_.clear();
+      // room for every candidate before the list is built: growing it by doubling while it is
+      // built holds the old list and the new at once (56 bytes a contact, about nine a grain in a
+      // settled box: 0.5 GB a million grains)
+      {
+        size_t most = 0;
+        if (pairs)
+          for (int i = 0; i < ni; ++i)
+            for (gr_uint e = g.nbr_offsets[i]; e < g.nbr_offsets[i + 1]; ++e)
+              most += int(g.nbr_indices[e]) > i;
+        if (g.plane_offsets) most += g.plane_offsets[n];
+        if (seq_.capacity() < most) {
+          seq_ = std::vector<SeqContact>();  // freed before the larger list is taken
+          seq_.reserve(most + most / 16);
+        }
       }
+      // grain by grain (gr_seq_build, which a device's build calls too), through a scratch row
+      const int* ids = c.d.id;
+      const int* collider_of = plane_collider_.data();
+      for (int i = 0; i < ni; ++i) {
+        const size_t row = (pairs ? g.nbr_offsets[i + 1] - g.nbr_offsets[i] : 0) +
+                           (g.plane_offsets ? g.plane_offsets[i + 1] - g.plane_offsets[i] : 0);
+        if (seq_row_.size() < row) seq_row_.resize(row);
+        const gr_uint count = gr_seq_build(&g, &prm, ids, collider_of, i, seq_row_.data());
+        seq_.insert(seq_.end(), seq_row_.begin(), seq_row_.begin() + count);
+      }
+      seq_count_ = seq_.size();
+      colour_blocks();
     }
-    // grain by grain (gr_seq_build, which a device's build calls too), through a scratch row
-    const int* ids = c.d.id;
-    const int* collider_of = plane_collider_.data();
-    for (int i = 0; i < ni; ++i) {
-      const size_t row = (pairs ? g.nbr_offsets[i + 1] - g.nbr_offsets[i] : 0) +
-                         (g.plane_offsets ? g.plane_offsets[i + 1] - g.plane_offsets[i] : 0);
-      if (seq_row_.size() < row) seq_row_.resize(row);
-      const gr_uint count = gr_seq_build(&g, &prm, ids, collider_of, i, seq_row_.data());
-      seq_.insert(seq_.end(), seq_row_.begin(), seq_row_.begin() + count);
-    }
-    colour_blocks();
     order_waves(c.threads, waves);
     seq_grain_.swap(grain);
     seq_plane_offsets_.assign(g.plane_offsets,
@@ -204,7 +234,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // (dt / dt_last)^2, waits in the contact's accumulators for the warm start (pre-stabilization
   // does not read them), which keeps its tangential part across the contact's normal once the
   // pre-stabilized positions are known (gr_warm_open)
-  if (warm && !kept) {
+  if (warm && !kept && !built_there) {
     load_of.resize(seq_.size());
     const long lm = static_cast<long>(seq_.size());
 #pragma omp parallel for schedule(static) num_threads(c.threads) if (parallel)
@@ -221,7 +251,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // run on the device in one call, below (opencl/iterations.h: the same steps in the same order)
   opencl::SequentialSolve on_device;
   std::vector<uint8_t>& loaded = loaded_;  // a byte a contact: 1 when it carries a load
-  if (device && warm && !resident) {
+  if (device && warm && !resident && !built_there) {
     loaded.resize(seq_.size());
     for (size_t k = 0; k < seq_.size(); ++k) loaded[k] = load_of[k] != 0u;
     on_device.loaded = loaded.data();
@@ -381,6 +411,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     // its own and the pins follow the shapes here
     opencl::SequentialContacts on = contact_sweep();
     on.resident = resident;
+    on.built = built_there;
+    // the list stays there unless the host reads it before the next substep (impact data,
+    // shapes' passes, below)
+    on.stay = !c.impacts && !c.shapes_on;
+    size_t loaded_there = 0;
+    on.loaded = on.stay ? &loaded_there : nullptr;
     on.keep_warm = warm;
     on.keep_scale = scale;
     on.relax = relax;
@@ -404,6 +440,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       }
     }
     p = p_.data();
+    device_.stale = on.stay;
+    device_.loaded = loaded_there;
   }
   device_.holds_contacts = device;
   for (int it = 0; it < c.iterations && !device; ++it) {
@@ -445,7 +483,17 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     }
   }
 
-  // the loads the next substep starts from
+  // the loads the next substep starts from (on the device, with the list, when it stays there)
+  if (device_.stale) {
+    seq_loads_.clear();
+    seq_table_.clear();
+  } else {
+    store_loads();
+  }
+  seq_dt_ = dt;
+}
+
+void GrainsSolver::store_loads() {
   seq_loads_.clear();
   {
     size_t loaded = 0;
@@ -461,13 +509,23 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     seq_loads_.push_back({q.key, q.ln, {sign * q.lt[0], sign * q.lt[1], sign * q.lt[2]}});
   }
   index_loads();
-  seq_dt_ = dt;
+}
+
+// The solver's state is logically the device's list; bringing the host's copy up to date changes
+// no result, so a const caller (save_state, a copy) may ask for it.
+void GrainsSolver::sync_contacts() const {
+  if (!device_.stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.seq_.resize(seq_count_);
+  self.device_.device->fetch_contacts(self.contact_sweep());
+  self.store_loads();
+  self.device_.stale = false;
 }
 
 opencl::SequentialContacts GrainsSolver::contact_sweep() {
   opencl::SequentialContacts on;
   on.contacts = seq_.data();
-  on.count = seq_.size();
+  on.count = seq_count_;
   on.block_start = block_start_.data();
   on.blocks = block_start_.size() - 1;
   on.colour_blocks = colour_blocks_.data();
@@ -523,6 +581,13 @@ void GrainsSolver::colour_blocks() {
     block_links_.push_back((uint64_t(bi) << 32) | bj);
   }
   for (uint32_t b = 0; b < blocks; ++b) block_start_[b + 1] += block_start_[b];
+  colour_linked_blocks();
+}
+
+// The colours of block_start_'s blocks from their links (block_links_, lower << 32 | higher,
+// each once, in any order: a block takes the first colour none within two links has)
+void GrainsSolver::colour_linked_blocks() {
+  const uint32_t blocks = static_cast<uint32_t>(block_start_.size() - 1);
   // the links both ways, by block
   block_link_start_.assign(size_t(blocks) + 1, 0u);
   for (const uint64_t l : block_links_) {
@@ -598,7 +663,7 @@ void GrainsSolver::order_waves(int threads, bool waves) {
       block_wave_[b + 1] = block_wave_[b] + (any ? 1u : 0u);
       if (any) wave_start_.push_back(block_start_[b]);
     }
-    wave_start_.push_back(static_cast<uint32_t>(seq_.size()));
+    wave_start_.push_back(static_cast<uint32_t>(seq_count_));
     return;
   }
   size_t largest = 0;

@@ -603,20 +603,41 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
 
 GrainsSolver::DeviceSlot::DeviceSlot() = default;
 GrainsSolver::DeviceSlot::~DeviceSlot() = default;
-GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot&) {}
-GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot&) {
+GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
+  if (o.owner) o.owner->sync_contacts();
+}
+GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& o) {
+  if (o.owner) o.owner->sync_contacts();
   device.reset();
-  holds_contacts = false;
+  holds_contacts = stale = false;
+  loaded = 0;
+  owner = nullptr;
   return *this;
 }
-GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&&) noexcept = default;
-GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&&) noexcept = default;
+// a move brings the host's copy up to date too (the moved-from solver is still whole), so that
+// no slot is stale without its owner set
+GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&& o)
+    : device(std::move(o.device)), holds_contacts(o.holds_contacts) {
+  if (o.owner) o.owner->sync_contacts();
+  o.holds_contacts = false;
+}
+GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
+  if (o.owner) o.owner->sync_contacts();
+  device = std::move(o.device);
+  holds_contacts = o.holds_contacts;
+  stale = false;
+  loaded = 0;
+  owner = nullptr;
+  o.holds_contacts = false;
+  return *this;
+}
 
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
   stabilize_passes_ = 0;
+  device_.owner = this;
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
   gr_grains g;
@@ -664,6 +685,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     seq_loads_.clear();
     seq_table_.clear();
     seq_valid_ = false;
+    device_.stale = false;
     iterate(c);
   }
 
@@ -1379,6 +1401,7 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
 // ---- checkpoint ----
 
 void GrainsSolver::save_state(StateWriter& w) const {
+  sync_contacts();  // the loads the device's list ended with
   w.section("grains rows");
   w.value(rows_valid_);
   w.value(rows_skin_);
@@ -1438,6 +1461,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(seq_loads_);
   index_loads();
   seq_valid_ = false;
+  device_.holds_contacts = device_.stale = false;
 }
 
 // ---- contact history ----

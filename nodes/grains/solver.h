@@ -146,6 +146,13 @@ class GrainsSolver {
   void load_state(StateReader& r);
   // substeps so far whose gauss_seidel contact list was the last substep's (seq_list_kept)
   size_t contact_lists_kept() const { return seq_lists_kept_; }
+  // gauss_seidel's lists the OpenCL device built (gauss_seidel.cpp), and the last substep's list
+  // (brought from the device when it is newer there)
+  size_t contact_lists_built_on_device() const { return seq_lists_device_; }
+  const std::vector<gr_seq_contact>& contact_list() const {
+    sync_contacts();
+    return seq_;
+  }
   // the pre-stabilization passes the last substep ran (either solver; 0 when it ran none)
   int stabilize_passes() const { return stabilize_passes_; }
   // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
@@ -217,17 +224,24 @@ class GrainsSolver {
                      int threads);
 
   // the iterations on an OpenCL device (use_opencl), opened at the first substep that asks; a
-  // copy of the solver opens its own. holds_contacts: the device holds seq_ as it is, from its
-  // last call (a copy's device holds nothing)
+  // copy of the solver opens its own. holds_contacts: the device holds the contact list from its
+  // last call (a copy's device holds nothing); stale: the host's copy of it (seq_, seq_loads_)
+  // is older, the device's list ending with `loaded` normal loads, and sync_contacts() brings
+  // it. A copy or move of the solver brings it first: declared before seq_ and seq_loads_, the
+  // slot is copied before them, and its copy and move call owner->sync_contacts() (owner: the
+  // solver whose substep last ran, set there; stale only after one)
   struct DeviceSlot {
     std::unique_ptr<opencl::Iterations> device;
     bool holds_contacts = false;
+    bool stale = false;
+    size_t loaded = 0;
+    const GrainsSolver* owner = nullptr;
     DeviceSlot();
     ~DeviceSlot();
     DeviceSlot(const DeviceSlot&);
     DeviceSlot& operator=(const DeviceSlot&);
-    DeviceSlot(DeviceSlot&&) noexcept;
-    DeviceSlot& operator=(DeviceSlot&&) noexcept;
+    DeviceSlot(DeviceSlot&&);
+    DeviceSlot& operator=(DeviceSlot&&);
   };
   DeviceSlot device_;
   NeighborSearch search_;
@@ -268,6 +282,11 @@ class GrainsSolver {
     float lt[3];
   };
   std::vector<SeqContact> seq_;
+  size_t seq_count_ = 0;  // the list's length (seq_'s, or the device's when it built the list)
+  // the host's copy of a list the device has newer (DeviceSlot::stale), and its loads
+  void sync_contacts() const;
+  // seq_loads_ from seq_'s normal loads, indexed by key
+  void store_loads();
   std::vector<SeqContact> seq_row_;  // one grain's contacts as gr_seq_build writes them
   // seq_ in blocks of grains, the blocks in colours (colour_blocks): block b's contacts are
   // seq_[block_start_[b], block_start_[b + 1]); colour c's blocks are
@@ -277,7 +296,9 @@ class GrainsSolver {
   std::vector<uint32_t> block_linked_;  // (blocks) the last lower block + 1 linked to each
   std::vector<uint32_t> block_link_start_, block_link_to_;
   std::vector<int32_t> block_colour_;
+  // colour_blocks: block_start_ and block_links_ from seq_, then colour_linked_blocks()
   void colour_blocks();
+  void colour_linked_blocks();
   // each block's contacts in waves that share no moving grain (order_waves): block b's waves
   // are block_wave_[b] to block_wave_[b + 1], wave w's contacts seq_[wave_start_[w],
   // wave_start_[w + 1])
@@ -294,7 +315,7 @@ class GrainsSolver {
   // substep's in seq_grain_now_) under the same friction scales; seq_valid_ says seq_ holds the
   // last substep's list
   bool seq_valid_ = false;
-  size_t seq_lists_kept_ = 0;
+  size_t seq_lists_kept_ = 0, seq_lists_device_ = 0;
   int stabilize_passes_ = 0;  // stabilize_passes()
   std::vector<float> seq_grain_, seq_grain_now_;
   std::vector<gr_uint> seq_plane_offsets_;

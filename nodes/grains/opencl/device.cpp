@@ -166,10 +166,25 @@ bool sweep_items(uint64_t* items, std::string* problem) {
   return true;
 }
 
+bool host_contacts(bool* host, std::string* problem) {
+  *host = false;
+  const char* text = std::getenv("GRAINS_OPENCL_HOST_CONTACTS");
+  if (!text || !*text) return true;
+  const std::string value = text;
+  if (value != "0" && value != "1") {
+    *problem = "GRAINS_OPENCL_HOST_CONTACTS: '" + value + "' is neither 0 nor 1";
+    return false;
+  }
+  *host = value == "1";
+  return true;
+}
+
 bool chosen_device(DeviceChoice* out, std::string* problem) {
   *out = DeviceChoice{};
   uint64_t cap = 0, items = 0;
-  if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem)) return false;
+  bool host = false;
+  if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem) || !host_contacts(&host, problem))
+    return false;
   const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
   const std::string text = env ? env : "";
   if (!text.empty() && !parse_device_choice(text, out, problem)) {

@@ -53,6 +53,12 @@ bool buffer_cap(uint64_t* bytes, std::string* problem);
 // chosen_device() checks it too.
 bool sweep_items(uint64_t* items, std::string* problem);
 
+// GRAINS_OPENCL_HOST_CONTACTS: 1 has the host build gauss_seidel's contact list and look up its
+// carried loads, as the CPU path does, and send it to the device; 0 or unset lets the device
+// build it where it can (Iterations::build_sequential: the same list, bit for bit). For
+// comparing the two. Malformed: false, *problem says why. chosen_device() checks it too.
+bool host_contacts(bool* host, std::string* problem);
+
 struct BuildResult {
   bool ok = false;
   double seconds = 0;  // wall time of the build

@@ -113,6 +113,7 @@ struct Iterations::Impl {
   // the work-items that share a block in a sweep (GRAINS_OPENCL_SWEEP_ITEMS, or by the device's
   // kind), and each sweep kernel's own limit (CL_KERNEL_WORK_GROUP_SIZE) once asked
   size_t sweep_items = 1;
+  bool builds_contacts = true;  // GRAINS_OPENCL_HOST_CONTACTS unset or 0
   std::vector<std::pair<cl_kernel, size_t>> group_limit;
   cl_device_id device = nullptr;
   // pre-stabilization's start positions, what carried contacts moved, their flags, and the
@@ -124,6 +125,13 @@ struct Iterations::Impl {
   cl_kernel warm_open = nullptr, warm_factor = nullptr, warm_cut = nullptr, warm_balance = nullptr,
             warm_cold = nullptr, take_back = nullptr, warm_repeat = nullptr, warm_apply = nullptr;
   cl_kernel keep = nullptr;  // a resident contact list's loads kept (gr_k_keep)
+  // the list built on the device (build_sequential): the kernels, the last list while the new
+  // one looks its loads up there, each grain's count and offset, the table of the last list's
+  // loaded contacts, the blocks' starts and links, a count of loaded contacts
+  cl_kernel seq_count = nullptr, seq_fill = nullptr, seq_blocks = nullptr, seq_links = nullptr,
+            seq_table = nullptr, seq_lookup = nullptr, seq_loaded = nullptr;
+  Buffer seq_old, seq_offsets, seq_table_slots, seq_block_start, seq_links_bits, seq_loaded_count,
+      id, plane_collider;
   Buffer velocity, repeat, external, balance, cold, cut;
   std::vector<Buffer> normal, factor;  // by part of the contacts, as seq
   // the Jacobi path's: a pass, and the largest move's parts
@@ -144,7 +152,9 @@ struct Iterations::Impl {
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
                       &target, &target_weight, &target_stiffness, &block_wave, &wave_start,
                       &colour_blocks, &stable, &carried, &carried_flag, &block_most, &moved,
-                      &moved_part, &velocity, &repeat, &external, &balance, &cold, &cut})
+                      &moved_part, &velocity, &repeat, &external, &balance, &cold, &cut,
+                      &seq_old, &seq_offsets, &seq_table_slots, &seq_block_start, &seq_links_bits,
+                      &seq_loaded_count, &id, &plane_collider})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -153,7 +163,8 @@ struct Iterations::Impl {
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
-                        warm_apply, keep, stabilize_grains,
+                        warm_apply, keep, seq_count, seq_fill, seq_blocks, seq_links,
+                        seq_table, seq_lookup, seq_loaded, stabilize_grains,
                         largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
       if (k) clReleaseKernel(k);
@@ -187,6 +198,11 @@ struct Iterations::Impl {
   void project_pins(Buffer* x, size_t global);
   // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
   void upload_contacts(const SequentialContacts& s);
+  // s's blocks' waves and colours alone
+  void upload_blocks(const SequentialContacts& s);
+  // the contacts `seq` holds when it is one part (held_whole): how many
+  size_t held = 0;
+  bool held_whole = false;
   // kernel k's arguments that sweep_colour sets for each part: its contacts, the colour's first
   // block there (in s.colour_blocks), their count, the part's first contact
   struct PartArgs {

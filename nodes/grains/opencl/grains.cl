@@ -337,6 +337,97 @@ __kernel void gr_k_stabilize(gr_params prm, GR_GRAINS_ARGS, __global float* x, _
   }
 }
 
+/* gauss_seidel's contact list built on the device (Iterations::build_sequential, in this
+ * order): each grain's contacts counted, the counts summed (gr_k_scan_*), each grain's written
+ * from its offset (gr_seq_build: the host's build, so the same list); each block's first
+ * contact; the blocks the contacts link; and, with a warm start, each contact's carried load
+ * found by key in the list the device's last solve left. */
+__kernel void gr_k_seq_count(gr_params prm, GR_GRAINS_ARGS, __global const int* id,
+                             __global const int* plane_collider, int n, __global gr_uint* count) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    count[i] = gr_seq_build(&g, &prm, id, plane_collider, i, 0);
+  }
+}
+
+__kernel void gr_k_seq_fill(gr_params prm, GR_GRAINS_ARGS, __global const int* id,
+                            __global const int* plane_collider, int n,
+                            __global const gr_uint* offsets, __global gr_seq_contact* seq) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_seq_build(&g, &prm, id, plane_collider, i, seq + offsets[i]);
+  }
+}
+
+/* block b's first contact, b = 0 .. blocks (the last: the list's end) */
+__kernel void gr_k_seq_blocks(__global const gr_uint* offsets, int n, int block_grains, int blocks,
+                              __global gr_uint* start) {
+  const int b = (int)get_global_id(0);
+  if (b > blocks) return;
+  start[b] = offsets[min(b * block_grains, n)];
+}
+
+/* the blocks' links (GrainsSolver::colour_blocks): a contact whose other grain moves and lies in
+ * another block sets that block's bit in its own block's row of `links` (words a row, zeroed
+ * before); an integer or gives the same bits in any order */
+__kernel void gr_k_seq_links(__global const gr_seq_contact* seq, int count, int block_grains,
+                             int words, __global volatile gr_uint* links) {
+  const int k = (int)get_global_id(0);
+  int bi, bj;
+  if (k >= count || !(seq[k].moves & 2u)) return;
+  bi = seq[k].i / block_grains;
+  bj = seq[k].j / block_grains;
+  if (bi != bj) atomic_or(&links[bi * words + bj / 32], 1u << (bj % 32));
+}
+
+/* the loaded contacts of the last list into `table` (2^bits slots of a contact's number + 1,
+ * zeroed before), each from gr_seq_slot of its key on to the first free slot. Which slot a
+ * contact takes depends on the schedule; what a lookup finds does not (keys are unique). */
+__kernel void gr_k_seq_table(__global const gr_seq_contact* old, int count, int bits,
+                             __global volatile gr_uint* table) {
+  const int k = (int)get_global_id(0);
+  const gr_uint mask = (1u << bits) - 1u;
+  gr_uint h;
+  if (k >= count || !(old[k].ln > 0.0f)) return;
+  h = gr_seq_slot(old[k].key, bits);
+  while (atomic_cmpxchg(&table[h], 0u, (gr_uint)k + 1u) != 0u) h = (h + 1u) & mask;
+}
+
+/* each contact's carried load (gauss_seidel.cpp's lookup by key): the last list's contact with
+ * its key, its loads turned to the lower id's side and scaled (gr_seq_take_load); flag[k] 1 when
+ * there is one */
+__kernel void gr_k_seq_lookup(__global gr_seq_contact* seq, int count,
+                              __global const gr_seq_contact* old, int bits,
+                              __global const gr_uint* table, float scale, __global uchar* flag) {
+  const int k = (int)get_global_id(0);
+  const gr_uint mask = (1u << bits) - 1u;
+  gr_uint h, o;
+  if (k >= count) return;
+  flag[k] = 0;
+  for (h = gr_seq_slot(seq[k].key, bits); (o = table[h]) != 0u; h = (h + 1u) & mask) {
+    __global const gr_seq_contact* c = old + (o - 1u);
+    if (c->key == seq[k].key) {
+      const float side = gr_seq_carry_sign(c);
+      gr_seq_take_load(seq + k, c->ln,
+                       gr_make3(side * c->lt[0], side * c->lt[1], side * c->lt[2]), scale);
+      flag[k] = 1;
+      return;
+    }
+  }
+}
+
+/* how many contacts carry a normal load into the next substep (an integer count) */
+__kernel void gr_k_seq_loaded(__global const gr_seq_contact* seq, gr_uint base, int count,
+                              __global volatile gr_uint* loaded) {
+  const int k = (int)get_global_id(0);
+  (void)base;
+  if (k < count && seq[k].ln > 0.0f) atomic_inc(loaded);
+}
+
 /* The neighbour rows on the device (kernels/grid.h; opencl/neighbours.cpp launches these in
  * order): the bounds, the grains counted and placed in their cells, the rows counted, then
  * filled. Integer atomics only count: a cell's grains may sit in any order, and a row, sorted by

@@ -84,6 +84,9 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
     items = (type & CL_DEVICE_TYPE_CPU) ? 1 : 64;
   }
   impl_->sweep_items = static_cast<size_t>(items);
+  bool host = false;
+  if (!host_contacts(&host, &problem)) throw std::runtime_error("use_opencl: " + problem);
+  impl_->builds_contacts = !host;
   impl_->device = d;
   cl_int status = CL_SUCCESS;
   impl_->ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);
@@ -115,6 +118,10 @@ const std::string& Iterations::device_name() const {
 
 bool Iterations::shares_blocks() const {
   return impl_->sweep_items > 1;
+}
+
+bool Iterations::builds_contacts() const {
+  return impl_->builds_contacts;
 }
 
 void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& size,
@@ -224,7 +231,6 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
 }
 
 void Iterations::Impl::upload_contacts(const SequentialContacts& s) {
-  const size_t u = sizeof(gr_uint);
   // the contacts in parts of whole blocks (Impl::seq): a million grains' take about 0.5 GB, more
   // than some devices' largest buffer (PoCL: 4 GiB) at ten million
   const size_t per = sizeof(gr_seq_contact);
@@ -242,6 +248,13 @@ void Iterations::Impl::upload_contacts(const SequentialContacts& s) {
                  count = s.block_start[part_block[k + 1]] - first;
     upload(seq[k], s.contacts + first, count * per);
   }
+  held = s.count;
+  held_whole = parts == 1;
+  upload_blocks(s);
+}
+
+void Iterations::Impl::upload_blocks(const SequentialContacts& s) {
+  const size_t u = sizeof(gr_uint);
   upload(block_wave, s.block_wave, (s.blocks + 1) * u);
   upload(wave_start, s.wave_start, (s.waves + 1) * u);
   upload(colour_blocks, s.colour_blocks, s.blocks * u);
@@ -444,8 +457,10 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   const bool contacts = s.count > 0;
   // whether the contacts carry loads (the warm start runs): the host's flags, or with a
   // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded
-  const bool loaded = s.resident ? s.keep_warm : w.loaded != nullptr;
-  if (!s.resident) {
+  const bool loaded = s.resident || s.built ? s.keep_warm : w.loaded != nullptr;
+  if (s.built) {
+    m.upload_blocks(s);
+  } else if (!s.resident) {
     m.upload_contacts(s);
     if (contacts && loaded) m.upload(m.carried_flag, w.loaded, s.count);
   } else if (contacts) {
@@ -594,7 +609,139 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   m.download(*result, p, 3 * n * f);
   if (w.x) m.download(m.stable, w.x, 3 * n * f);
   if (w.carried) m.download(m.velocity, w.v, 3 * n * f);
-  m.download_contacts(s);
+  if (!s.stay) m.download_contacts(s);
+  if (s.loaded) {
+    gr_uint count_loaded = 0;
+    m.seq_loaded_count.reserve(m.ctx, sizeof(gr_uint), m.largest);
+    check(clEnqueueWriteBuffer(m.queue, m.seq_loaded_count.mem, CL_FALSE, 0, sizeof count_loaded,
+                               &count_loaded, 0, nullptr, nullptr),
+          "clEnqueueWriteBuffer");
+    cl_kernel k = m.kernel(m.seq_loaded, "gr_k_seq_loaded");
+    set_buffer(k, 3, &m.seq_loaded_count);
+    m.each_part(k, 0, s);
+    m.download(m.seq_loaded_count, &count_loaded, sizeof count_loaded);
+    *s.loaded = count_loaded;
+  }
+}
+
+void Iterations::fetch_contacts(const SequentialContacts& s) {
+  impl_->download_contacts(s);
+}
+
+bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
+                                  const IterationSizes& size, const int* id,
+                                  const int* plane_collider, bool warm, float scale,
+                                  size_t block_grains, BuiltList* out) {
+  Impl& m = *impl_;
+  const size_t n = size.n, u = sizeof(gr_uint), per = sizeof(gr_seq_contact);
+  const size_t blocks = (n + block_grains - 1) / block_grains;
+  const size_t words = (blocks + 31) / 32;
+  if (n == 0 || blocks * words * u > (size_t(64) << 20)) return false;
+  // the loads are looked up in the last list, which must be whole in one buffer
+  if (warm && !(m.held_whole && m.seq.size() == 1)) return false;
+  const int count = static_cast<int>(n);
+  const size_t local = kGroup;
+  auto launch = [&](cl_kernel k, size_t items) {
+    const size_t global = (items + kGroup - 1) / kGroup * kGroup;
+    if (global == 0) return;
+    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+  };
+  HostArray inputs[kArrays];
+  m.upload_grains(g, size, nullptr, inputs);
+  m.upload(m.id, id, n * sizeof(int));
+  m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
+  // each grain's contacts counted, their offsets
+  m.seq_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  cl_kernel counter = m.kernel(m.seq_count, "gr_k_seq_count");
+  m.set_grains(counter, prm, g, inputs);
+  set_buffer(counter, kFirstOwn, id ? &m.id : nullptr);
+  set_buffer(counter, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
+  check(clSetKernelArg(counter, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
+  set_buffer(counter, kFirstOwn + 3, &m.seq_offsets);
+  launch(counter, n);
+  m.scan(m.seq_offsets, n);
+  gr_uint total = 0;
+  check(clEnqueueReadBuffer(m.queue, m.seq_offsets.mem, CL_TRUE, n * u, u, &total, 0, nullptr,
+                            nullptr),
+        "clEnqueueReadBuffer");
+  if (size_t(total) * per > m.largest) return false;
+  // the last list moves aside for the lookup; the new one is written where the solve reads it
+  if (m.seq.empty()) m.seq.resize(1);
+  for (size_t k = 1; k < m.seq.size(); ++k) m.seq[k].release();
+  m.seq.resize(1);
+  std::swap(m.seq[0], m.seq_old);
+  const size_t old_count = m.held;
+  m.seq[0].reserve(m.ctx, size_t(total) * per, m.largest);
+  cl_kernel fill = m.kernel(m.seq_fill, "gr_k_seq_fill");
+  m.set_grains(fill, prm, g, inputs);
+  set_buffer(fill, kFirstOwn, id ? &m.id : nullptr);
+  set_buffer(fill, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
+  check(clSetKernelArg(fill, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
+  set_buffer(fill, kFirstOwn + 3, &m.seq_offsets);
+  set_buffer(fill, kFirstOwn + 4, &m.seq[0]);
+  launch(fill, n);
+  m.held = total;
+  m.held_whole = true;
+  m.part_block.assign({0, blocks});
+  // each block's first contact
+  const int grains_a_block = static_cast<int>(block_grains), block_count = static_cast<int>(blocks);
+  m.seq_block_start.reserve(m.ctx, (blocks + 1) * u, m.largest);
+  cl_kernel starts = m.kernel(m.seq_blocks, "gr_k_seq_blocks");
+  set_buffer(starts, 0, &m.seq_offsets);
+  check(clSetKernelArg(starts, 1, sizeof(int), &count), "clSetKernelArg");
+  check(clSetKernelArg(starts, 2, sizeof(int), &grains_a_block), "clSetKernelArg");
+  check(clSetKernelArg(starts, 3, sizeof(int), &block_count), "clSetKernelArg");
+  set_buffer(starts, 4, &m.seq_block_start);
+  launch(starts, blocks + 1);
+  // the blocks' links
+  const int contacts = static_cast<int>(total), row_words = static_cast<int>(words);
+  const gr_uint zero = 0;
+  m.seq_links_bits.reserve(m.ctx, blocks * words * u, m.largest);
+  check(clEnqueueFillBuffer(m.queue, m.seq_links_bits.mem, &zero, u, 0, blocks * words * u, 0,
+                            nullptr, nullptr),
+        "clEnqueueFillBuffer");
+  cl_kernel links = m.kernel(m.seq_links, "gr_k_seq_links");
+  set_buffer(links, 0, &m.seq[0]);
+  check(clSetKernelArg(links, 1, sizeof(int), &contacts), "clSetKernelArg");
+  check(clSetKernelArg(links, 2, sizeof(int), &grains_a_block), "clSetKernelArg");
+  check(clSetKernelArg(links, 3, sizeof(int), &row_words), "clSetKernelArg");
+  set_buffer(links, 4, &m.seq_links_bits);
+  launch(links, total);
+  // the carried loads, by key in the last list's loaded contacts
+  if (warm && total > 0) {
+    int bits = 4;
+    while ((size_t(1) << bits) < 2 * old_count) ++bits;
+    const size_t slots = size_t(1) << bits;
+    m.seq_table_slots.reserve(m.ctx, slots * u, m.largest);
+    check(clEnqueueFillBuffer(m.queue, m.seq_table_slots.mem, &zero, u, 0, slots * u, 0, nullptr,
+                              nullptr),
+          "clEnqueueFillBuffer");
+    const int olds = static_cast<int>(old_count);
+    cl_kernel table = m.kernel(m.seq_table, "gr_k_seq_table");
+    set_buffer(table, 0, &m.seq_old);
+    check(clSetKernelArg(table, 1, sizeof(int), &olds), "clSetKernelArg");
+    check(clSetKernelArg(table, 2, sizeof(int), &bits), "clSetKernelArg");
+    set_buffer(table, 3, &m.seq_table_slots);
+    launch(table, old_count);
+    m.carried_flag.reserve(m.ctx, total, m.largest);
+    cl_kernel lookup = m.kernel(m.seq_lookup, "gr_k_seq_lookup");
+    set_buffer(lookup, 0, &m.seq[0]);
+    check(clSetKernelArg(lookup, 1, sizeof(int), &contacts), "clSetKernelArg");
+    set_buffer(lookup, 2, &m.seq_old);
+    check(clSetKernelArg(lookup, 3, sizeof(int), &bits), "clSetKernelArg");
+    set_buffer(lookup, 4, &m.seq_table_slots);
+    check(clSetKernelArg(lookup, 5, sizeof(float), &scale), "clSetKernelArg");
+    set_buffer(lookup, 6, &m.carried_flag);
+    launch(lookup, total);
+  }
+  out->count = total;
+  out->words = words;
+  out->block_start.resize(blocks + 1);
+  out->links.resize(blocks * words);
+  m.download(m.seq_block_start, out->block_start.data(), (blocks + 1) * u);
+  m.download(m.seq_links_bits, out->links.data(), blocks * words * u);
+  return true;
 }
 
 }  // namespace grains::opencl

@@ -59,6 +59,15 @@ struct SequentialContacts {
   bool keep_warm = false;
   float keep_scale = 0.0f;
   float relax = 1.0f;  // over_relaxation
+  // built: the contacts are on the device already, in one part, each with its carried load and
+  // flag (build_sequential; keep_warm says whether any was looked up): only the blocks, colours
+  // and waves go up
+  bool built = false;
+  // stay: the contacts stay on the device after the solve, the host's copy is not written
+  // (fetch_contacts brings them when the host needs them); *loaded (when set) receives how many
+  // of them end with a normal load
+  bool stay = false;
+  size_t* loaded = nullptr;
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;
 };
@@ -125,11 +134,36 @@ class Iterations {
                         float* p, const SequentialContacts& s, const SequentialSolve& w,
                         int iterations);
 
+  // contact_solver gauss_seidel's contact list built on the device from g's neighbour rows and
+  // collider planes (gr_seq_build, grain by grain: the host's list, bit for bit), id and
+  // plane_collider as gr_seq_build takes them (host arrays, null where absent). With `warm`
+  // each contact starts with the load its key ended the device's last solve with, scaled by
+  // `scale` (gr_seq_take_load), and is flagged for the warm start. Out: the contacts' count,
+  // each block's first contact (block_grains grains a block, `blocks` of them, and the end)
+  // and the blocks' links, a row of `words` 32-bit words a block (bit b of row a: a contact of
+  // block a moves a grain of block b). False, the device's last list left as it was, when the
+  // list would not fit one buffer or the links would take more than 64 MiB.
+  struct BuiltList {
+    size_t count = 0;
+    std::vector<gr_uint> block_start;
+    size_t words = 0;
+    std::vector<gr_uint> links;
+  };
+  bool build_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                        const int* id, const int* plane_collider, bool warm, float scale,
+                        size_t block_grains, BuiltList* out);
+  // the contacts the device's last solve left (s's blocks, parts as they went up or were built)
+  // into s.contacts
+  void fetch_contacts(const SequentialContacts& s);
+
   const std::string& device_name() const;
   // whether a block's contacts are shared among several work-items (GRAINS_OPENCL_SWEEP_ITEMS,
   // or a device that is not a CPU): the contacts must then come in waves (GrainsSettings::
   // sweep_waves)
   bool shares_blocks() const;
+  // whether gauss_seidel's contact list may be built here (build_sequential), which
+  // GRAINS_OPENCL_HOST_CONTACTS=1 refuses
+  bool builds_contacts() const;
 
  private:
   struct Impl;

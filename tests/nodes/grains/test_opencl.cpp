@@ -4,10 +4,11 @@
 // frames run to run, and a clear refusal where there is no device. Longer runs are checked by
 // their physical measures beside the CPU path's tests (stacks, sand_pile, the DEM collapse:
 // test names starting "use_opencl:", CTest label opencl).
-#include <catch2/catch.hpp>
 #include <stdlib.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 
 #include "tests/nodes/grains/grains_harness.h"
@@ -237,6 +238,57 @@ TEST_CASE(
   CHECK(whole.P != waves.P);
 }
 
+TEST_CASE("use_opencl: the contact list the device builds is the host's, loads and all",
+          "[opencl][gauss_seidel]") {
+  // With use_opencl, gauss_seidel's list is built on the device from the rows and planes it is
+  // sent (gr_seq_build, the host's function), each contact's carried load found there by key in
+  // the list the device's last solve left (Iterations::build_sequential), and the list stays
+  // there: neither it nor its loads cross each substep. GRAINS_OPENCL_HOST_CONTACTS=1 has the
+  // host build the list and look the loads up, as the CPU path does, and send it. Both ways,
+  // test::layered_drop (512 grains falling onto the ground at 8 x 10, 96 substeps, lists kept
+  // and rebuilt): the same list, field for field, the same loads and the same bits.
+  size_t kept_there = 0, kept_here = 0;
+  const test::Scene there = test::layered_drop(true, false, &kept_there);
+  const test::Scene here = [&] {
+    test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
+    return test::layered_drop(true, false, &kept_here);
+  }();
+  INFO("lists built on the device: " << there.solver.contact_lists_built_on_device()
+                                     << "; kept: " << kept_there << " and " << kept_here);
+  REQUIRE(there.solver.contact_lists_built_on_device() >= 10);  // the premise: warm rebuilds too
+  CHECK(here.solver.contact_lists_built_on_device() == 0);
+  CHECK(kept_there == kept_here);
+  const std::vector<gr_seq_contact>& a = there.solver.contact_list();
+  const std::vector<gr_seq_contact>& b = here.solver.contact_list();
+  REQUIRE(a.size() == b.size());
+  REQUIRE(a.size() > 512);
+  size_t differ = 0, loaded = 0;
+  auto same = [](float x, float y) { return std::memcmp(&x, &y, sizeof x) == 0; };
+  for (size_t k = 0; k < a.size(); ++k) {
+    const gr_seq_contact &x = a[k], &y = b[k];
+    const bool equal = x.i == y.i && x.j == y.j && x.e == y.e && x.moves == y.moves &&
+                       x.key == y.key && same(x.k, y.k) && same(x.share, y.share) &&
+                       same(x.mu, y.mu) && same(x.ln, y.ln) && same(x.lt[0], y.lt[0]) &&
+                       same(x.lt[1], y.lt[1]) && same(x.lt[2], y.lt[2]);
+    differ += !equal;
+    loaded += x.ln > 0.0f;
+  }
+  INFO(a.size() << " contacts, " << loaded << " loaded");
+  CHECK(differ == 0);
+  CHECK(loaded > 256);
+  CHECK(there.P == here.P);
+  CHECK(there.v == here.v);
+  // across frames, whose grains the node sorts again each frame (a load is found by the grains'
+  // ids): sand_pile, 6 frames
+  auto built = pour(true, 6);
+  auto sent = [&] {
+    test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
+    return pour(true, 6);
+  }();
+  CHECK(array(*built, "P") == array(*sent, "P"));
+  CHECK(array(*built, "v") == array(*sent, "v"));
+}
+
 TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding it gives",
           "[opencl][gauss_seidel]") {
   // While gauss_seidel keeps its contact list across substeps (the CPU path's test "... a contact
@@ -341,4 +393,8 @@ TEST_CASE("use_opencl without an OpenCL platform, or with a device that is not t
   CHECK_THAT(test::read_text(log),
              Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_SWEEP_ITEMS: '2048' is "
                              "not a whole number from 1 to 1024"));
+  CHECK(run_with("GRAINS_OPENCL_HOST_CONTACTS", "yes", run, log) == 2);
+  CHECK_THAT(test::read_text(log),
+             Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_HOST_CONTACTS: 'yes' is "
+                             "neither 0 nor 1"));
 }

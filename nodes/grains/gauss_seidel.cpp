@@ -119,13 +119,14 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // With use_opencl the device builds a new list from the rows and planes it is sent, and finds
   // each contact's carried load in the list its last solve left (build_sequential: the list this
   // host would build, bit for bit), so that the list crosses neither way. The host builds it
-  // where the device does not: a list in waves (ordered here), impact data or rigid shapes
+  // where the device does not: impact data or rigid shapes
   // (which read it here between passes), loads the device does not hold (a list read back from
-  // a saved state), a list larger than a device buffer.
+  // a saved state), a list larger than a device buffer. A device whose work-items share a block
+  // orders the list's waves there too (Iterations::order_waves).
   opencl::Iterations::BuiltList built;
   const bool built_there =
-      device && !kept && !waves && !c.impacts && !c.shapes_on &&
-      (!warm || device_.holds_contacts) && open_device().builds_contacts() &&
+      device && !kept && !c.impacts && !c.shapes_on && (!warm || device_.holds_contacts) &&
+      open_device().builds_contacts() &&
       open_device().build_sequential(g, prm, device_sizes(c), c.d.id,
                                      g.plane_offsets ? plane_collider_.data() : nullptr, warm,
                                      scale, kBlockGrains, &built);
@@ -157,6 +158,13 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
           for (uint32_t bits = built.links[a * built.words + w]; bits; bits &= bits - 1)
             block_links_.push_back((uint64_t(a) << 32) | (32 * w + __builtin_ctz(bits)));
       colour_linked_blocks();
+      if (waves) {
+        open_device().order_waves(colour_blocks_.data(), colour_start_.data(),
+                                  colour_start_.size() - 1, &block_wave_, &wave_start_);
+        seq_waves_ = true;
+      } else {
+        order_waves(c.threads, false);
+      }
     } else {
       seq_.clear();
       // room for every candidate before the list is built: growing it by doubling while it is
@@ -186,8 +194,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       }
       seq_count_ = seq_.size();
       colour_blocks();
+      order_waves(c.threads, waves);
     }
-    order_waves(c.threads, waves);
     seq_grain_.swap(grain);
     seq_plane_offsets_.assign(g.plane_offsets,
                               g.plane_offsets ? g.plane_offsets + n + 1 : g.plane_offsets);
@@ -681,28 +689,14 @@ void GrainsSolver::order_waves(int threads, bool waves) {
     for (long t = first; t < last; ++t) {
       const uint32_t b = colour_blocks_[t];
       const size_t s = block_start_[b], e = block_start_[b + 1];
-      uint64_t* mark = wave_marks_.data();
+      gr_ulong* mark = wave_marks_.data();
       uint32_t* wave = wave_of_.data() + largest * size_t(omp_get_thread_num());
       SeqContact* copy = wave_block_.data() + largest * size_t(omp_get_thread_num());
       // beyond 128 waves (a grain touching more than a hundred others) a contact has a wave of
       // its own: no mark needed
       uint32_t count = 128, most = 0;
       for (size_t k = s; k < e; ++k) {
-        const SeqContact& q = seq_[k];
-        uint64_t in[2] = {0, 0};
-        for (int h = 0; h < 2; ++h) {
-          if (q.moves & (1u << h)) {
-            const size_t x = 2 * size_t(h ? q.j : q.i);
-            in[0] |= mark[x], in[1] |= mark[x + 1];
-          }
-        }
-        uint32_t w = ~in[0]   ? uint32_t(__builtin_ctzll(~in[0]))
-                     : ~in[1] ? 64u + uint32_t(__builtin_ctzll(~in[1]))
-                              : count++;
-        if (w < 128)
-          for (int h = 0; h < 2; ++h)
-            if (q.moves & (1u << h))
-              mark[2 * size_t(h ? q.j : q.i) + (w >> 6)] |= uint64_t(1) << (w & 63);
+        const uint32_t w = gr_seq_wave(mark, &seq_[k], &count);
         wave[k - s] = w;
         most = std::max(most, w + 1);
       }

@@ -303,7 +303,7 @@ class GrainsSolver {
   // are block_wave_[b] to block_wave_[b + 1], wave w's contacts seq_[wave_start_[w],
   // wave_start_[w + 1])
   std::vector<uint32_t> block_wave_, wave_start_;
-  std::vector<uint64_t> wave_marks_;                // 2 a grain: the waves 0-127 it is in
+  std::vector<gr_ulong> wave_marks_;                // 2 a grain: the waves 0-127 it is in
   std::vector<std::vector<uint32_t>> block_waves_;  // a block's waves' starts within it
   std::vector<SeqContact> wave_block_;              // a block's contacts, a copy per thread
   std::vector<uint32_t> wave_of_;                   // their waves

@@ -254,6 +254,44 @@ GR_INLINE float gr_seq_carry_sign(const GR_GLOBAL gr_seq_contact* q) {
   return (q->moves & 4u) ? -1.0f : 1.0f;
 }
 
+/* the number of trailing zero bits of x != 0 */
+GR_INLINE gr_uint gr_ctz64(gr_ulong x) {
+#ifdef GR_OPENCL
+  return (gr_uint)(63 - clz(x & (~x + 1)));
+#else
+  return (gr_uint)__builtin_ctzll(x);
+#endif
+}
+
+/* Contact q's wave in its block (GrainsSolver::order_waves, a device's gr_k_seq_waves): the
+ * first none of its moving grains is in yet, marked for them in `mark` (two words a grain: waves
+ * 0-127, a bit each). A grain in all 128 gives the contact a wave of its own, the next of
+ * *beyond (128 at the block's start): no mark needed. */
+GR_INLINE gr_uint gr_seq_wave(GR_GLOBAL gr_ulong* mark, const GR_GLOBAL gr_seq_contact* q,
+                              gr_uint* beyond) {
+  gr_ulong in0 = 0, in1 = 0;
+  gr_uint w;
+  int h;
+  for (h = 0; h < 2; ++h) {
+    if (q->moves & (1u << h)) {
+      const gr_ulong x = 2 * (gr_ulong)(h ? q->j : q->i);
+      in0 |= mark[x];
+      in1 |= mark[x + 1];
+    }
+  }
+  if (~in0)
+    w = gr_ctz64(~in0);
+  else if (~in1)
+    w = 64u + gr_ctz64(~in1);
+  else
+    w = (*beyond)++;
+  if (w < 128u)
+    for (h = 0; h < 2; ++h)
+      if (q->moves & (1u << h))
+        mark[2 * (gr_ulong)(h ? q->j : q->i) + (w >> 6)] |= (gr_ulong)1 << (w & 63u);
+  return w;
+}
+
 /* the slot of the open-addressed table of 2^bits slots (bits >= 1) where key's search starts */
 GR_INLINE gr_uint gr_seq_slot(gr_ulong key, int bits) {
   return (gr_uint)((key * (gr_ulong)0x9E3779B97F4A7C15UL) >> (64 - bits));

@@ -129,9 +129,11 @@ struct Iterations::Impl {
   // one looks its loads up there, each grain's count and offset, the table of the last list's
   // loaded contacts, the blocks' starts and links, a count of loaded contacts
   cl_kernel seq_count = nullptr, seq_fill = nullptr, seq_blocks = nullptr, seq_links = nullptr,
-            seq_table = nullptr, seq_lookup = nullptr, seq_loaded = nullptr;
+            seq_table = nullptr, seq_lookup = nullptr, seq_loaded = nullptr, seq_waves = nullptr,
+            seq_wave_starts = nullptr;
   Buffer seq_old, seq_offsets, seq_table_slots, seq_block_start, seq_links_bits, seq_loaded_count,
-      id, plane_collider;
+      id, plane_collider, flag_copy, marks, wave_of, wave_ends, block_waves;
+  bool built_flags = false;  // the built list's contacts have carried flags (a warm lookup)
   Buffer velocity, repeat, external, balance, cold, cut;
   std::vector<Buffer> normal, factor;  // by part of the contacts, as seq
   // the Jacobi path's: a pass, and the largest move's parts
@@ -154,7 +156,8 @@ struct Iterations::Impl {
                       &colour_blocks, &stable, &carried, &carried_flag, &block_most, &moved,
                       &moved_part, &velocity, &repeat, &external, &balance, &cold, &cut,
                       &seq_old, &seq_offsets, &seq_table_slots, &seq_block_start, &seq_links_bits,
-                      &seq_loaded_count, &id, &plane_collider})
+                      &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
+                      &wave_ends, &block_waves})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -164,8 +167,8 @@ struct Iterations::Impl {
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
                         warm_apply, keep, seq_count, seq_fill, seq_blocks, seq_links,
-                        seq_table, seq_lookup, seq_loaded, stabilize_grains,
-                        largest_part, bounds, cell_count,
+                        seq_table, seq_lookup, seq_loaded, seq_waves, seq_wave_starts,
+                        stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
@@ -203,6 +206,7 @@ struct Iterations::Impl {
   // the contacts `seq` holds when it is one part (held_whole): how many
   size_t held = 0;
   bool held_whole = false;
+  size_t grains = 0;  // the grains of the list build_sequential built
   // kernel k's arguments that sweep_colour sets for each part: its contacts, the colour's first
   // block there (in s.colour_blocks), their count, the part's first contact
   struct PartArgs {

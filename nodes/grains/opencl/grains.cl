@@ -428,6 +428,67 @@ __kernel void gr_k_seq_loaded(__global const gr_seq_contact* seq, gr_uint base, 
   if (k < count && seq[k].ln > 0.0f) atomic_inc(loaded);
 }
 
+/* gauss_seidel's waves on the device (Iterations::order_waves; GrainsSolver::order_waves, the
+ * host's, says why): a work-item a block of one colour puts the block's contacts in waves
+ * (gr_seq_wave), sorts them by wave, stably, through `copy` (each contact's flag goes with it),
+ * and leaves the ends of its waves that are not empty at ends[block_start[b] + b ...], their
+ * number at waves[b]. Blocks of a colour share no moving grain, so their marks never meet; each
+ * block clears its own. */
+__kernel void gr_k_seq_waves(__global gr_seq_contact* seq, __global gr_seq_contact* copy,
+                             __global uchar* flag, __global uchar* flag_copy,
+                             __global gr_ulong* mark, __global gr_uint* wave_of,
+                             __global gr_uint* ends, __global const gr_uint* block_start,
+                             __global const gr_uint* blocks, int first, int count,
+                             __global gr_uint* waves) {
+  const int t = (int)get_global_id(0);
+  gr_uint b, s, e, k, w, most = 0u, beyond = 128u, last = 0u, found = 0u;
+  __global gr_uint* at;
+  if (t >= count) return;
+  b = blocks[first + t];
+  s = block_start[b];
+  e = block_start[b + 1];
+  for (k = s; k < e; ++k) {
+    w = gr_seq_wave(mark, seq + k, &beyond);
+    wave_of[k] = w;
+    most = w + 1u > most ? w + 1u : most;
+  }
+  /* a block's waves number at most its contacts: most + 1 counts fit from s + b */
+  at = ends + s + b;
+  for (w = 0u; w <= most; ++w) at[w] = 0u;
+  for (k = s; k < e; ++k) ++at[wave_of[k] + 1u];
+  for (w = 0u; w < most; ++w) at[w + 1u] += at[w];
+  for (k = s; k < e; ++k) {
+    const gr_uint to = s + at[wave_of[k]]++;
+    copy[to] = seq[k];
+    if (flag) flag_copy[to] = flag[k];
+  }
+  for (k = s; k < e; ++k) {
+    seq[k] = copy[k];
+    if (flag) flag[k] = flag_copy[k];
+    if (seq[k].moves & 1u) mark[2 * (gr_ulong)seq[k].i] = mark[2 * (gr_ulong)seq[k].i + 1] = 0;
+    if (seq[k].moves & 2u) mark[2 * (gr_ulong)seq[k].j] = mark[2 * (gr_ulong)seq[k].j + 1] = 0;
+  }
+  /* at[w] is now where wave w ends (relative to s): the ends of the waves that are not empty */
+  for (w = 0u; w < most; ++w)
+    if (at[w] != last) last = at[w], at[found++] = last;
+  waves[b] = found;
+}
+
+/* each wave's first contact, block by block (block_wave: each block's first wave, from the
+ * host): a block's first wave starts at its first contact, each other where the one before ends
+ * (gr_k_seq_waves' ends); the list's end, the last entry, the host writes */
+__kernel void gr_k_seq_wave_starts(__global const gr_uint* ends, __global const gr_uint* block_start,
+                                   __global const gr_uint* block_wave, int blocks,
+                                   __global gr_uint* wave_start) {
+  const int b = (int)get_global_id(0);
+  gr_uint s, w0, t, n;
+  if (b >= blocks) return;
+  s = block_start[b];
+  w0 = block_wave[b];
+  n = block_wave[b + 1] - w0;
+  for (t = 0u; t < n; ++t) wave_start[w0 + t] = s + (t ? ends[s + (gr_uint)b + t - 1u] : 0u);
+}
+
 /* The neighbour rows on the device (kernels/grid.h; opencl/neighbours.cpp launches these in
  * order): the bounds, the grains counted and placed in their cells, the rows counted, then
  * filled. Integer atomics only count: a cell's grains may sit in any order, and a row, sorted by

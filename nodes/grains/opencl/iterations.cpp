@@ -624,6 +624,70 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
 }
 
+void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour_start,
+                             size_t colours, std::vector<gr_uint>* block_wave,
+                             std::vector<gr_uint>* wave_start) {
+  Impl& m = *impl_;
+  const size_t u = sizeof(gr_uint), per = sizeof(gr_seq_contact);
+  const size_t total = m.held, blocks = m.part_block.back(), n = m.grains;
+  const size_t local = kGroup;
+  auto launch = [&](cl_kernel k, size_t items) {
+    const size_t global = (items + kGroup - 1) / kGroup * kGroup;
+    if (global == 0) return;
+    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+          "clEnqueueNDRangeKernel");
+  };
+  // the last list is no longer needed (its loads were looked up): it holds the copies
+  m.seq_old.reserve(m.ctx, std::max<size_t>(total, 1) * per, m.largest);
+  if (m.built_flags) m.flag_copy.reserve(m.ctx, total, m.largest);
+  const gr_ulong zero = 0;
+  m.marks.reserve(m.ctx, 2 * n * sizeof(gr_ulong), m.largest);
+  check(clEnqueueFillBuffer(m.queue, m.marks.mem, &zero, sizeof zero, 0, 2 * n * sizeof(gr_ulong),
+                            0, nullptr, nullptr),
+        "clEnqueueFillBuffer");
+  m.wave_of.reserve(m.ctx, total * u, m.largest);
+  m.wave_ends.reserve(m.ctx, (total + blocks + 1) * u, m.largest);
+  m.block_waves.reserve(m.ctx, (blocks + 1) * u, m.largest);
+  m.upload(m.colour_blocks, colour_blocks, blocks * u);
+  cl_kernel k = m.kernel(m.seq_waves, "gr_k_seq_waves");
+  set_buffer(k, 0, &m.seq[0]);
+  set_buffer(k, 1, &m.seq_old);
+  set_buffer(k, 2, m.built_flags ? &m.carried_flag : nullptr);
+  set_buffer(k, 3, m.built_flags ? &m.flag_copy : nullptr);
+  set_buffer(k, 4, &m.marks);
+  set_buffer(k, 5, &m.wave_of);
+  set_buffer(k, 6, &m.wave_ends);
+  set_buffer(k, 7, &m.seq_block_start);
+  set_buffer(k, 8, &m.colour_blocks);
+  set_buffer(k, 11, &m.block_waves);
+  for (size_t c = 0; c < colours; ++c) {
+    const int first = static_cast<int>(colour_start[c]);
+    const int count = static_cast<int>(colour_start[c + 1] - colour_start[c]);
+    check(clSetKernelArg(k, 9, sizeof(int), &first), "clSetKernelArg");
+    check(clSetKernelArg(k, 10, sizeof(int), &count), "clSetKernelArg");
+    launch(k, static_cast<size_t>(count));
+  }
+  // each block's first wave, here; each wave's first contact, there
+  std::vector<gr_uint> waves(blocks);
+  m.download(m.block_waves, waves.data(), blocks * u);
+  block_wave->assign(blocks + 1, 0u);
+  for (size_t b = 0; b < blocks; ++b) (*block_wave)[b + 1] = (*block_wave)[b] + waves[b];
+  const size_t count = block_wave->back();
+  m.upload(m.block_wave, block_wave->data(), (blocks + 1) * u);
+  m.wave_start.reserve(m.ctx, (count + 1) * u, m.largest);
+  const int block_count = static_cast<int>(blocks);
+  cl_kernel starts = m.kernel(m.seq_wave_starts, "gr_k_seq_wave_starts");
+  set_buffer(starts, 0, &m.wave_ends);
+  set_buffer(starts, 1, &m.seq_block_start);
+  set_buffer(starts, 2, &m.block_wave);
+  check(clSetKernelArg(starts, 3, sizeof(int), &block_count), "clSetKernelArg");
+  set_buffer(starts, 4, &m.wave_start);
+  launch(starts, blocks);
+  wave_start->resize(count + 1);
+  m.download(m.wave_start, wave_start->data(), count * u);
+  (*wave_start)[count] = static_cast<gr_uint>(total);
+}
+
 void Iterations::fetch_contacts(const SequentialContacts& s) {
   impl_->download_contacts(s);
 }
@@ -683,6 +747,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   launch(fill, n);
   m.held = total;
   m.held_whole = true;
+  m.grains = n;
   m.part_block.assign({0, blocks});
   // each block's first contact
   const int grains_a_block = static_cast<int>(block_grains), block_count = static_cast<int>(blocks);
@@ -709,7 +774,8 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   set_buffer(links, 4, &m.seq_links_bits);
   launch(links, total);
   // the carried loads, by key in the last list's loaded contacts
-  if (warm && total > 0) {
+  m.built_flags = warm && total > 0;
+  if (m.built_flags) {
     int bits = 4;
     while ((size_t(1) << bits) < 2 * old_count) ++bits;
     const size_t slots = size_t(1) << bits;

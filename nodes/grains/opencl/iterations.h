@@ -152,6 +152,12 @@ class Iterations {
   bool build_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
                         const int* id, const int* plane_collider, bool warm, float scale,
                         size_t block_grains, BuiltList* out);
+  // the list build_sequential built, in waves (GrainsSolver::order_waves, the host's: the same
+  // order, bit for bit), colour by colour (colour_blocks, colour_start and colours as
+  // SequentialContacts holds them); out: each block's first wave (blocks + 1) and each wave's
+  // first contact, then the list's end
+  void order_waves(const gr_uint* colour_blocks, const gr_uint* colour_start, size_t colours,
+                   std::vector<gr_uint>* block_wave, std::vector<gr_uint>* wave_start);
   // the contacts the device's last solve left (s's blocks, parts as they went up or were built)
   // into s.contacts
   void fetch_contacts(const SequentialContacts& s);

@@ -246,38 +246,43 @@ TEST_CASE("use_opencl: the contact list the device builds is the host's, loads a
   // there: neither it nor its loads cross each substep. GRAINS_OPENCL_HOST_CONTACTS=1 has the
   // host build the list and look the loads up, as the CPU path does, and send it. Both ways,
   // test::layered_drop (512 grains falling onto the ground at 8 x 10, 96 substeps, lists kept
-  // and rebuilt): the same list, field for field, the same loads and the same bits.
-  size_t kept_there = 0, kept_here = 0;
-  const test::Scene there = test::layered_drop(true, false, &kept_there);
-  const test::Scene here = [&] {
-    test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
-    return test::layered_drop(true, false, &kept_here);
-  }();
-  INFO("lists built on the device: " << there.solver.contact_lists_built_on_device()
-                                     << "; kept: " << kept_there << " and " << kept_here);
-  REQUIRE(there.solver.contact_lists_built_on_device() >= 10);  // the premise: warm rebuilds too
-  CHECK(here.solver.contact_lists_built_on_device() == 0);
-  CHECK(kept_there == kept_here);
-  const std::vector<gr_seq_contact>& a = there.solver.contact_list();
-  const std::vector<gr_seq_contact>& b = here.solver.contact_list();
-  REQUIRE(a.size() == b.size());
-  REQUIRE(a.size() > 512);
-  size_t differ = 0, loaded = 0;
-  auto same = [](float x, float y) { return std::memcmp(&x, &y, sizeof x) == 0; };
-  for (size_t k = 0; k < a.size(); ++k) {
-    const gr_seq_contact &x = a[k], &y = b[k];
-    const bool equal = x.i == y.i && x.j == y.j && x.e == y.e && x.moves == y.moves &&
-                       x.key == y.key && same(x.k, y.k) && same(x.share, y.share) &&
-                       same(x.mu, y.mu) && same(x.ln, y.ln) && same(x.lt[0], y.lt[0]) &&
-                       same(x.lt[1], y.lt[1]) && same(x.lt[2], y.lt[2]);
-    differ += !equal;
-    loaded += x.ln > 0.0f;
+  // and rebuilt): the same list, field for field, the same loads and the same bits; with a
+  // work-item a block, and with 64, whose list comes in waves, ordered on the device too.
+  for (const char* items : {"1", "64"}) {
+    INFO("work-items a block: " << items);
+    test::ScopedEnv sweep("GRAINS_OPENCL_SWEEP_ITEMS", items);
+    size_t kept_there = 0, kept_here = 0;
+    const test::Scene there = test::layered_drop(true, false, &kept_there);
+    const test::Scene here = [&] {
+      test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
+      return test::layered_drop(true, false, &kept_here);
+    }();
+    INFO("lists built on the device: " << there.solver.contact_lists_built_on_device()
+                                       << "; kept: " << kept_there << " and " << kept_here);
+    REQUIRE(there.solver.contact_lists_built_on_device() >= 10);  // the premise: warm rebuilds
+    CHECK(here.solver.contact_lists_built_on_device() == 0);
+    CHECK(kept_there == kept_here);
+    const std::vector<gr_seq_contact>& a = there.solver.contact_list();
+    const std::vector<gr_seq_contact>& b = here.solver.contact_list();
+    REQUIRE(a.size() == b.size());
+    REQUIRE(a.size() > 512);
+    size_t differ = 0, loaded = 0;
+    auto same = [](float x, float y) { return std::memcmp(&x, &y, sizeof x) == 0; };
+    for (size_t k = 0; k < a.size(); ++k) {
+      const gr_seq_contact &x = a[k], &y = b[k];
+      const bool equal = x.i == y.i && x.j == y.j && x.e == y.e && x.moves == y.moves &&
+                         x.key == y.key && same(x.k, y.k) && same(x.share, y.share) &&
+                         same(x.mu, y.mu) && same(x.ln, y.ln) && same(x.lt[0], y.lt[0]) &&
+                         same(x.lt[1], y.lt[1]) && same(x.lt[2], y.lt[2]);
+      differ += !equal;
+      loaded += x.ln > 0.0f;
+    }
+    INFO(a.size() << " contacts, " << loaded << " loaded");
+    CHECK(differ == 0);
+    CHECK(loaded > 256);
+    CHECK(there.P == here.P);
+    CHECK(there.v == here.v);
   }
-  INFO(a.size() << " contacts, " << loaded << " loaded");
-  CHECK(differ == 0);
-  CHECK(loaded > 256);
-  CHECK(there.P == here.P);
-  CHECK(there.v == here.v);
   // across frames, whose grains the node sorts again each frame (a load is found by the grains'
   // ids): sand_pile, 6 frames
   auto built = pour(true, 6);

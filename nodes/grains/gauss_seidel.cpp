@@ -129,7 +129,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       open_device().builds_contacts() &&
       open_device().build_sequential(g, prm, device_sizes(c), c.d.id,
                                      g.plane_offsets ? plane_collider_.data() : nullptr, warm,
-                                     scale, kBlockGrains, &built);
+                                     scale, kBlockGrains, rows_on_device_, &built);
   if (!built_there && !resident) sync_contacts();  // the host's list and loads are read below
   std::vector<uint32_t>& load_of = load_of_;
   if (kept) {

@@ -924,12 +924,14 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     if (!on_device)
       search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
+    rows_on_device_ = on_device;
     rows_valid_ = false;
     if (first && c.reusable) remember_rows(c.d, c.s, c.search_radius, threads);
   }
   // mutually constrained grains that do not collide: drop their pairs once here rather than
   // look each one up in every iteration; rows keep their order and their max_neighbors cut
   if (c.constraints_on && !c.s.collide_mutually_constrained_particles) {
+    rows_on_device_ = false;  // the device's rows keep them
     drop_constrained_pairs(threads);
     g.nbr_unconstrained = 1;
   }
@@ -1443,6 +1445,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(rows_p_);
   r.array(neighbors_.offsets);
   r.array(neighbors_.indices);
+  rows_on_device_ = false;
   r.section("grains history");
   r.array(hist_id_);
   r.array(hist_rows_.offsets);

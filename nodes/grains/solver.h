@@ -244,6 +244,9 @@ class GrainsSolver {
     DeviceSlot& operator=(DeviceSlot&&);
   };
   DeviceSlot device_;
+  // use_opencl: neighbors_ holds the rows the device's last search gave, unchanged (kept across
+  // substeps with them), which the device's contact list build then reads where they are
+  bool rows_on_device_ = false;
   NeighborSearch search_;
   NeighborList neighbors_;
   // the rows' build: valid, for these grains (ids) and radii, from these predicted positions,

@@ -148,6 +148,7 @@ struct Iterations::Impl {
             row_fill = nullptr, scan_blocks = nullptr, scan_sums = nullptr, scan_apply = nullptr;
   Buffer nb_P, nb_radius, nb_part, nb_key, nb_count, nb_cursor, nb_grains, nb_sorted, nb_offsets,
       nb_keys, nb_indices, nb_sums;
+  bool rows_found = false;  // nb_offsets and nb_indices hold the rows the last search gave
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();

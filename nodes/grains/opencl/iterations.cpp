@@ -695,7 +695,7 @@ void Iterations::fetch_contacts(const SequentialContacts& s) {
 bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
                                   const IterationSizes& size, const int* id,
                                   const int* plane_collider, bool warm, float scale,
-                                  size_t block_grains, BuiltList* out) {
+                                  size_t block_grains, bool rows_there, BuiltList* out) {
   Impl& m = *impl_;
   const size_t n = size.n, u = sizeof(gr_uint), per = sizeof(gr_seq_contact);
   const size_t blocks = (n + block_grains - 1) / block_grains;
@@ -711,14 +711,24 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
     check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
           "clEnqueueNDRangeKernel");
   };
+  // the rows where the device found them, else g's sent
+  const bool there = rows_there && m.rows_found && g.nbr_offsets;
+  gr_grains sent = g;
+  if (there) sent.nbr_offsets = sent.nbr_indices = nullptr;
   HostArray inputs[kArrays];
-  m.upload_grains(g, size, nullptr, inputs);
+  m.upload_grains(sent, size, nullptr, inputs);
+  auto set_rows = [&](cl_kernel k) {
+    m.set_grains(k, prm, sent, inputs);
+    if (!there) return;
+    set_buffer(k, 1 + kNbrOffsets, &m.nb_offsets);
+    set_buffer(k, 1 + kNbrIndices, &m.nb_indices);
+  };
   m.upload(m.id, id, n * sizeof(int));
   m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
   // each grain's contacts counted, their offsets
   m.seq_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
   cl_kernel counter = m.kernel(m.seq_count, "gr_k_seq_count");
-  m.set_grains(counter, prm, g, inputs);
+  set_rows(counter);
   set_buffer(counter, kFirstOwn, id ? &m.id : nullptr);
   set_buffer(counter, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
   check(clSetKernelArg(counter, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
@@ -738,7 +748,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   const size_t old_count = m.held;
   m.seq[0].reserve(m.ctx, size_t(total) * per, m.largest);
   cl_kernel fill = m.kernel(m.seq_fill, "gr_k_seq_fill");
-  m.set_grains(fill, prm, g, inputs);
+  set_rows(fill);
   set_buffer(fill, kFirstOwn, id ? &m.id : nullptr);
   set_buffer(fill, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
   check(clSetKernelArg(fill, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");

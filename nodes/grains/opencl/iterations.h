@@ -142,7 +142,9 @@ class Iterations {
   // each block's first contact (block_grains grains a block, `blocks` of them, and the end)
   // and the blocks' links, a row of `words` 32-bit words a block (bit b of row a: a contact of
   // block a moves a grain of block b). False, the device's last list left as it was, when the
-  // list would not fit one buffer or the links would take more than 64 MiB.
+  // list would not fit one buffer or the links would take more than 64 MiB. rows_there: g's
+  // rows are those the device's last find_neighbours() gave, which it then reads where they
+  // are instead of taking g's.
   struct BuiltList {
     size_t count = 0;
     std::vector<gr_uint> block_start;
@@ -151,7 +153,7 @@ class Iterations {
   };
   bool build_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
                         const int* id, const int* plane_collider, bool warm, float scale,
-                        size_t block_grains, BuiltList* out);
+                        size_t block_grains, bool rows_there, BuiltList* out);
   // the list build_sequential built, in waves (GrainsSolver::order_waves, the host's: the same
   // order, bit for bit), colour by colour (colour_blocks, colour_start and colours as
   // SequentialContacts holds them); out: each block's first wave (blocks + 1) and each wave's

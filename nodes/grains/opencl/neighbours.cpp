@@ -123,6 +123,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
                                  const NeighborQuery& q, NeighborList& out) {
   Impl& m = *impl_;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
+  m.rows_found = false;
   if (n >= size_t(std::numeric_limits<int>::max()) / 3) return false;
   m.open_neighbours();
   if (!m.bounds) return false;
@@ -200,7 +201,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
   const size_t entries = out.offsets[n];
   out.indices.resize(entries);
-  if (entries == 0) return true;
+  if (entries == 0) return m.rows_found = true;
   if (entries * sizeof(gr_pair_key_t) > m.largest) {
     out.offsets.clear();
     return false;
@@ -210,6 +211,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   arg(m.row_fill, 8, m.nb_keys), arg(m.row_fill, 9, m.nb_indices);
   launch(m.queue, m.row_fill, n);
   m.download(m.nb_indices, out.indices.data(), entries * u);
+  m.rows_found = true;
   return true;
 }
 

@@ -34,7 +34,9 @@
 // and so is every grain's mass, repulsion and friction (seq_list_kept); each contact then still
 // holds the loads it ended with, which the warm start would otherwise look up by the grains'
 // ids. The result is the same bit for bit; the DEM collapse kept 74% of its lists, and at 40 x 1
-// settle_100k took 11% less time.
+// settle_100k took 11% less time. With use_opencl the device builds the list and keeps it
+// (below, and docs/opencl.md); the host's copy is brought from there when read here
+// (sync_contacts).
 //
 // The passes run within blocks of kBlockGrains grains (a contact belongs to its lower index's
 // block), the blocks in colours (colour_blocks): no two blocks of a colour touch the same moving
@@ -116,13 +118,13 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const bool resident = device && kept && device_.holds_contacts;
   const bool warm = (device_.stale ? device_.loaded > 0 : !seq_loads_.empty()) && seq_dt_ > 0.0f;
   const float scale = warm ? (dt / seq_dt_) * (dt / seq_dt_) : 0.0f;
-  // With use_opencl the device builds a new list from the rows and planes it is sent, and finds
-  // each contact's carried load in the list its last solve left (build_sequential: the list this
-  // host would build, bit for bit), so that the list crosses neither way. The host builds it
-  // where the device does not: impact data or rigid shapes
-  // (which read it here between passes), loads the device does not hold (a list read back from
-  // a saved state), a list larger than a device buffer. A device whose work-items share a block
-  // orders the list's waves there too (Iterations::order_waves).
+  // With use_opencl the device builds a new list from its rows and the planes it is sent, and
+  // finds each contact's carried load in the list its last solve left (build_sequential: the
+  // list this host would build, bit for bit), so that the list crosses neither way; a device
+  // whose work-items share a block orders its waves there too (Iterations::order_waves). The
+  // host builds it where the device does not: with impact data or rigid shapes (which read it
+  // here between passes), loads the device does not hold (read back from a saved state), a list
+  // larger than a device buffer.
   opencl::Iterations::BuiltList built;
   const bool built_there =
       device && !kept && !c.impacts && !c.shapes_on && (!warm || device_.holds_contacts) &&

@@ -202,6 +202,9 @@ struct Iterations::Impl {
   void project_pins(Buffer* x, size_t global);
   // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
   void upload_contacts(const SequentialContacts& s);
+  // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
+  // once past their count
+  void launch(cl_kernel k, size_t items);
   // s's blocks' waves and colours alone
   void upload_blocks(const SequentialContacts& s);
   // the contacts `seq` holds when it is one part (held_whole): how many

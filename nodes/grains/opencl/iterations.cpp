@@ -630,13 +630,6 @@ void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour
   Impl& m = *impl_;
   const size_t u = sizeof(gr_uint), per = sizeof(gr_seq_contact);
   const size_t total = m.held, blocks = m.part_block.back(), n = m.grains;
-  const size_t local = kGroup;
-  auto launch = [&](cl_kernel k, size_t items) {
-    const size_t global = (items + kGroup - 1) / kGroup * kGroup;
-    if (global == 0) return;
-    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
-          "clEnqueueNDRangeKernel");
-  };
   // the last list is no longer needed (its loads were looked up): it holds the copies
   m.seq_old.reserve(m.ctx, std::max<size_t>(total, 1) * per, m.largest);
   if (m.built_flags) m.flag_copy.reserve(m.ctx, total, m.largest);
@@ -665,7 +658,7 @@ void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour
     const int count = static_cast<int>(colour_start[c + 1] - colour_start[c]);
     check(clSetKernelArg(k, 9, sizeof(int), &first), "clSetKernelArg");
     check(clSetKernelArg(k, 10, sizeof(int), &count), "clSetKernelArg");
-    launch(k, static_cast<size_t>(count));
+    m.launch(k, static_cast<size_t>(count));
   }
   // each block's first wave, here; each wave's first contact, there
   std::vector<gr_uint> waves(blocks);
@@ -682,10 +675,16 @@ void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour
   set_buffer(starts, 2, &m.block_wave);
   check(clSetKernelArg(starts, 3, sizeof(int), &block_count), "clSetKernelArg");
   set_buffer(starts, 4, &m.wave_start);
-  launch(starts, blocks);
+  m.launch(starts, blocks);
   wave_start->resize(count + 1);
   m.download(m.wave_start, wave_start->data(), count * u);
   (*wave_start)[count] = static_cast<gr_uint>(total);
+}
+
+void Iterations::Impl::launch(cl_kernel k, size_t items) {
+  const size_t local = kGroup, global = (std::max<size_t>(items, 1) + kGroup - 1) / kGroup * kGroup;
+  check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
+        "clEnqueueNDRangeKernel");
 }
 
 void Iterations::fetch_contacts(const SequentialContacts& s) {
@@ -704,36 +703,32 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   // the loads are looked up in the last list, which must be whole in one buffer
   if (warm && !(m.held_whole && m.seq.size() == 1)) return false;
   const int count = static_cast<int>(n);
-  const size_t local = kGroup;
-  auto launch = [&](cl_kernel k, size_t items) {
-    const size_t global = (items + kGroup - 1) / kGroup * kGroup;
-    if (global == 0) return;
-    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
-          "clEnqueueNDRangeKernel");
-  };
   // the rows where the device found them, else g's sent
   const bool there = rows_there && m.rows_found && g.nbr_offsets;
   gr_grains sent = g;
   if (there) sent.nbr_offsets = sent.nbr_indices = nullptr;
   HostArray inputs[kArrays];
   m.upload_grains(sent, size, nullptr, inputs);
-  auto set_rows = [&](cl_kernel k) {
+  // gr_k_seq_count's and gr_k_seq_fill's common arguments: prm, the grains, id, plane_collider,
+  // n, the counts or offsets
+  auto set_build = [&](cl_kernel k) {
     m.set_grains(k, prm, sent, inputs);
-    if (!there) return;
-    set_buffer(k, 1 + kNbrOffsets, &m.nb_offsets);
-    set_buffer(k, 1 + kNbrIndices, &m.nb_indices);
+    if (there) {
+      set_buffer(k, 1 + kNbrOffsets, &m.nb_offsets);
+      set_buffer(k, 1 + kNbrIndices, &m.nb_indices);
+    }
+    set_buffer(k, kFirstOwn, id ? &m.id : nullptr);
+    set_buffer(k, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
+    check(clSetKernelArg(k, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
+    set_buffer(k, kFirstOwn + 3, &m.seq_offsets);
   };
   m.upload(m.id, id, n * sizeof(int));
   m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
   // each grain's contacts counted, their offsets
   m.seq_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
   cl_kernel counter = m.kernel(m.seq_count, "gr_k_seq_count");
-  set_rows(counter);
-  set_buffer(counter, kFirstOwn, id ? &m.id : nullptr);
-  set_buffer(counter, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
-  check(clSetKernelArg(counter, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
-  set_buffer(counter, kFirstOwn + 3, &m.seq_offsets);
-  launch(counter, n);
+  set_build(counter);
+  m.launch(counter, n);
   m.scan(m.seq_offsets, n);
   gr_uint total = 0;
   check(clEnqueueReadBuffer(m.queue, m.seq_offsets.mem, CL_TRUE, n * u, u, &total, 0, nullptr,
@@ -748,13 +743,9 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   const size_t old_count = m.held;
   m.seq[0].reserve(m.ctx, size_t(total) * per, m.largest);
   cl_kernel fill = m.kernel(m.seq_fill, "gr_k_seq_fill");
-  set_rows(fill);
-  set_buffer(fill, kFirstOwn, id ? &m.id : nullptr);
-  set_buffer(fill, kFirstOwn + 1, plane_collider ? &m.plane_collider : nullptr);
-  check(clSetKernelArg(fill, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
-  set_buffer(fill, kFirstOwn + 3, &m.seq_offsets);
+  set_build(fill);
   set_buffer(fill, kFirstOwn + 4, &m.seq[0]);
-  launch(fill, n);
+  m.launch(fill, n);
   m.held = total;
   m.held_whole = true;
   m.grains = n;
@@ -768,7 +759,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   check(clSetKernelArg(starts, 2, sizeof(int), &grains_a_block), "clSetKernelArg");
   check(clSetKernelArg(starts, 3, sizeof(int), &block_count), "clSetKernelArg");
   set_buffer(starts, 4, &m.seq_block_start);
-  launch(starts, blocks + 1);
+  m.launch(starts, blocks + 1);
   // the blocks' links
   const int contacts = static_cast<int>(total), row_words = static_cast<int>(words);
   const gr_uint zero = 0;
@@ -782,7 +773,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   check(clSetKernelArg(links, 2, sizeof(int), &grains_a_block), "clSetKernelArg");
   check(clSetKernelArg(links, 3, sizeof(int), &row_words), "clSetKernelArg");
   set_buffer(links, 4, &m.seq_links_bits);
-  launch(links, total);
+  m.launch(links, total);
   // the carried loads, by key in the last list's loaded contacts
   m.built_flags = warm && total > 0;
   if (m.built_flags) {
@@ -799,7 +790,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
     check(clSetKernelArg(table, 1, sizeof(int), &olds), "clSetKernelArg");
     check(clSetKernelArg(table, 2, sizeof(int), &bits), "clSetKernelArg");
     set_buffer(table, 3, &m.seq_table_slots);
-    launch(table, old_count);
+    m.launch(table, old_count);
     m.carried_flag.reserve(m.ctx, total, m.largest);
     cl_kernel lookup = m.kernel(m.seq_lookup, "gr_k_seq_lookup");
     set_buffer(lookup, 0, &m.seq[0]);
@@ -809,7 +800,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
     set_buffer(lookup, 4, &m.seq_table_slots);
     check(clSetKernelArg(lookup, 5, sizeof(float), &scale), "clSetKernelArg");
     set_buffer(lookup, 6, &m.carried_flag);
-    launch(lookup, total);
+    m.launch(lookup, total);
   }
   out->count = total;
   out->words = words;

@@ -17,16 +17,6 @@ constexpr int64_t kCellMax = (int64_t(1) << 31) - 2;  // the most cells along an
 constexpr size_t kBoundsItems = 16 * kGroup;          // gr_k_bounds' work-items
 constexpr size_t kScanBlock = 1024;                   // counts a work-item of the prefix sum sums
 
-size_t whole_groups(size_t items) {
-  return (std::max<size_t>(items, 1) + kGroup - 1) / kGroup * kGroup;
-}
-
-void launch(cl_command_queue queue, cl_kernel k, size_t items) {
-  const size_t global = whole_groups(items), local = kGroup;
-  check(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
-        "clEnqueueNDRangeKernel");
-}
-
 template <class T>
 void arg(cl_kernel k, cl_uint index, const T& value) {
   check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
@@ -111,12 +101,12 @@ void Iterations::Impl::scan(Buffer& x, size_t n) {
             nblocks = static_cast<int>(blocks);
   arg(scan_blocks, 0, x), arg(scan_blocks, 1, count), arg(scan_blocks, 2, block);
   arg(scan_blocks, 3, nb_sums), arg(scan_blocks, 4, nblocks);
-  launch(queue, scan_blocks, blocks);
+  launch(scan_blocks, blocks);
   arg(scan_sums, 0, nb_sums), arg(scan_sums, 1, nblocks);
-  launch(queue, scan_sums, 1);
+  launch(scan_sums, 1);
   arg(scan_apply, 0, x), arg(scan_apply, 1, count), arg(scan_apply, 2, block);
   arg(scan_apply, 3, nb_sums), arg(scan_apply, 4, nblocks);
-  launch(queue, scan_apply, blocks);
+  launch(scan_apply, blocks);
 }
 
 bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
@@ -143,7 +133,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   m.nb_part.reserve(m.ctx, 7 * kBoundsItems * f, m.largest);
   arg(m.bounds, 0, m.nb_P), arg(m.bounds, 1, m.nb_radius), arg(m.bounds, 2, count),
       arg(m.bounds, 3, m.nb_part);
-  launch(m.queue, m.bounds, kBoundsItems);
+  m.launch(m.bounds, kBoundsItems);
   std::vector<float> part(7 * kBoundsItems);
   m.download(m.nb_part, part.data(), part.size() * f);
   const float inf = std::numeric_limits<float>::infinity();
@@ -181,13 +171,13 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
         "clEnqueueFillBuffer");
   arg(m.cell_count, 0, grid), arg(m.cell_count, 1, m.nb_P), arg(m.cell_count, 2, count);
   arg(m.cell_count, 3, m.nb_key), arg(m.cell_count, 4, m.nb_count);
-  launch(m.queue, m.cell_count, n);
+  m.launch(m.cell_count, n);
   m.scan(m.nb_count, cells);
   arg(m.cell_place, 0, m.nb_key), arg(m.cell_place, 1, count), arg(m.cell_place, 2, m.nb_count);
   arg(m.cell_place, 3, m.nb_cursor), arg(m.cell_place, 4, m.nb_grains);
   arg(m.cell_place, 5, m.nb_P), arg(m.cell_place, 6, m.nb_radius),
       arg(m.cell_place, 7, m.nb_sorted);
-  launch(m.queue, m.cell_place, n);
+  m.launch(m.cell_place, n);
 
   // the rows: their lengths, offsets, then the rows themselves
   m.nb_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
@@ -195,7 +185,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
     arg(k, 0, grid), arg(k, 1, m.nb_P), arg(k, 2, m.nb_radius), arg(k, 3, m.nb_count);
     arg(k, 4, m.nb_grains), arg(k, 5, m.nb_sorted), arg(k, 6, count), arg(k, 7, m.nb_offsets);
   }
-  launch(m.queue, m.row_count, n);
+  m.launch(m.row_count, n);
   m.scan(m.nb_offsets, n);
   out.offsets.resize(n + 1);
   m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
@@ -209,7 +199,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   m.nb_keys.reserve(m.ctx, entries * sizeof(gr_pair_key_t), m.largest);
   m.nb_indices.reserve(m.ctx, entries * u, m.largest);
   arg(m.row_fill, 8, m.nb_keys), arg(m.row_fill, 9, m.nb_indices);
-  launch(m.queue, m.row_fill, n);
+  m.launch(m.row_fill, n);
   m.download(m.nb_indices, out.indices.data(), entries * u);
   m.rows_found = true;
   return true;

@@ -192,9 +192,10 @@ struct Iterations::Impl {
   }
 
   // g's arrays (grain_arrays, into a) to `arrays` and the positions p to `p`, once a call;
-  // `next` made room for the passes that swap with p
+  // `next` made room for the passes that swap with p. rows_only: of the arrays only the
+  // neighbour rows go (the others went with the call before, unchanged)
   void upload_grains(const gr_grains& g, const IterationSizes& size, const float* positions,
-                     HostArray* a);
+                     HostArray* a, bool rows_only = false);
   // kernel k's first arguments: prm, the arrays `a` holds (null where it has none) and g's scalars
   void set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a);
   // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x

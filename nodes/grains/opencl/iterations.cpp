@@ -125,11 +125,12 @@ bool Iterations::builds_contacts() const {
 }
 
 void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& size,
-                                     const float* positions, HostArray* a) {
+                                     const float* positions, HostArray* a, bool rows_only) {
   grain_arrays(g, size, a);
+  // positions: one float past the last grain, as the contact loop's block loads read
   for (int k = 0; k < kArrays; ++k)
-    // positions: one float past the last grain, as the contact loop's block loads read
-    upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
+    if (!rows_only || k == kNbrOffsets || k == kNbrIndices)
+      upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
   const size_t bytes = (3 * size.n + 1) * sizeof(float);
   upload(p, positions, bytes);
   next.reserve(ctx, bytes, largest);
@@ -453,7 +454,9 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
           "clEnqueueNDRangeKernel");
   };
   HostArray inputs[kArrays];
-  m.upload_grains(g, size, p, inputs);
+  // a list built on the device came with the same grains' arrays (build_sequential), all but
+  // the rows, which clumping reads from these
+  m.upload_grains(g, size, p, inputs, s.built);
   const bool contacts = s.count > 0;
   // whether the contacts carry loads (the warm start runs): the host's flags, or with a
   // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded

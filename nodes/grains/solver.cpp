@@ -616,9 +616,10 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
 }
 // a move brings the host's copy up to date too (the moved-from solver is still whole), so that
 // no slot is stale without its owner set
-GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&& o)
-    : device(std::move(o.device)), holds_contacts(o.holds_contacts) {
-  if (o.owner) o.owner->sync_contacts();
+GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&& o) {
+  if (o.owner) o.owner->sync_contacts();  // through o's device: before it moves
+  device = std::move(o.device);
+  holds_contacts = o.holds_contacts;
   o.holds_contacts = false;
 }
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {

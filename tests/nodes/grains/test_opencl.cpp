@@ -313,21 +313,29 @@ TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding i
   CHECK(a.v == b.v);
 }
 
-TEST_CASE("use_opencl: a copy of a solver whose list the device keeps runs on as the original",
-          "[opencl][gauss_seidel]") {
+TEST_CASE(
+    "use_opencl: a copy or a move of a solver whose list the device keeps runs on as the original",
+    "[opencl][gauss_seidel]") {
   // A copy of the solver opens a device of its own, which holds none of the contacts the
   // original's device keeps: the copy must upload its list, not take the empty device's. The
   // contact-list scene is copied after its 96 substeps (the last ones kept their list) and both
   // run 24 more.
+  // A move brings the host's copy of the list from the device before the device moves with it
+  // (the list stays on the device after each solve): a scene moved while its list is there
+  // runs on as the original too.
   size_t kept = 0;
   test::Scene a = test::layered_drop(true, false, &kept);
   test::Scene b = a;
+  test::Scene there = test::layered_drop(true, false, &kept);
+  test::Scene moved = std::move(there);
   const size_t before = a.solver.contact_lists_kept();
-  for (int k = 0; k < 24; ++k) a.substep(), b.substep();
+  for (int k = 0; k < 24; ++k) a.substep(), b.substep(), moved.substep();
   INFO("lists kept in the 24 substeps: " << a.solver.contact_lists_kept() - before);
   REQUIRE(a.solver.contact_lists_kept() > before);  // the premise: the copy ran on a kept list
   CHECK(a.P == b.P);
   CHECK(a.v == b.v);
+  CHECK(a.P == moved.P);
+  CHECK(a.v == moved.v);
 }
 
 TEST_CASE("use_opencl: a substep that needs a buffer larger than the device's largest is refused",

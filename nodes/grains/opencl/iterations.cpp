@@ -448,11 +448,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   if (n == 0) return;
   const size_t f = sizeof(float);
   const int count = static_cast<int>(n);
-  const size_t local = kGroup, global = (n + kGroup - 1) / kGroup * kGroup;
-  auto per_grain = [&](cl_kernel k) {
-    check(clEnqueueNDRangeKernel(m.queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr),
-          "clEnqueueNDRangeKernel");
-  };
+  auto per_grain = [&](cl_kernel k) { m.launch(k, n); };
   HostArray inputs[kArrays];
   // a list built on the device came with the same grains' arrays (build_sequential), all but
   // the rows, which clumping reads from these

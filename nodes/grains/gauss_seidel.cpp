@@ -133,6 +133,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
                                      g.plane_offsets ? plane_collider_.data() : nullptr, warm,
                                      scale, kBlockGrains, rows_on_device_, &built);
   if (!built_there && !resident) sync_contacts();  // the host's list and loads are read below
+  if (!built_there && !kept && device_.rows_stale) {  // and the rows, which the device kept
+    sync_rows();
+    c.g.nbr_indices = neighbors_.indices.data();
+  }
   std::vector<uint32_t>& load_of = load_of_;
   if (kept) {
     ++seq_lists_kept_;

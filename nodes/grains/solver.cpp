@@ -42,6 +42,7 @@
 #include "engine/buffer.h"
 #include "nodes/grains/kernels/distance.h"
 #include "nodes/grains/kernels/iterate.h"
+#include "nodes/grains/kernels/row_stats.h"
 static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slots = planes");
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
@@ -604,12 +605,12 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
 GrainsSolver::DeviceSlot::DeviceSlot() = default;
 GrainsSolver::DeviceSlot::~DeviceSlot() = default;
 GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
-  if (o.owner) o.owner->sync_contacts();
+  if (o.owner) o.owner->sync_device();
 }
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& o) {
-  if (o.owner) o.owner->sync_contacts();
+  if (o.owner) o.owner->sync_device();
   device.reset();
-  holds_contacts = stale = false;
+  holds_contacts = stale = rows_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -617,20 +618,32 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
 // a move brings the host's copy up to date too (the moved-from solver is still whole), so that
 // no slot is stale without its owner set
 GrainsSolver::DeviceSlot::DeviceSlot(DeviceSlot&& o) {
-  if (o.owner) o.owner->sync_contacts();  // through o's device: before it moves
+  if (o.owner) o.owner->sync_device();  // through o's device: before it moves
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
   o.holds_contacts = false;
 }
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
-  if (o.owner) o.owner->sync_contacts();
+  if (o.owner) o.owner->sync_device();
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
-  stale = false;
+  stale = rows_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
   return *this;
+}
+
+void GrainsSolver::sync_rows() const {
+  if (!device_.rows_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_rows(self.neighbors_);
+  self.device_.rows_stale = false;
+}
+
+void GrainsSolver::sync_device() const {
+  sync_rows();
+  sync_contacts();
 }
 
 void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
@@ -903,6 +916,20 @@ bool GrainsSolver::keep_rows(const SubstepContext& c) const {
   return std::sqrt(moved2) < 0.25f * rows_skin_;
 }
 
+// The rows' indices stay on the device (find_pairs) when nothing in the substep reads them on
+// the host: gauss_seidel builds its contact list there (not with impact data or rigid shapes,
+// whose lists the host builds; gauss_seidel.cpp brings the rows when the device's build
+// declines), and there are no constrained pairs to drop and no clumping, whose Jacobi group
+// takes the host's rows. Error control's overlap statistics and the Verlet skin are then
+// reduced there (contact_stats, remember_rows); the grains node's sleeping test, a saved state
+// and a copy of the solver bring them (sync_rows).
+bool GrainsSolver::rows_stay(const SubstepContext& c) const {
+  const GrainsSettings& s = c.s;
+  return s.use_opencl && s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on &&
+         !(c.constraints_on && !s.collide_mutually_constrained_particles) &&
+         !(s.clumping_weight > 0);
+}
+
 void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   const size_t n = n_;
   const long ln = static_cast<long>(n);
@@ -913,6 +940,8 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
   // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
   // carry the sums over and use the search's own store.
+  // use_opencl: the rows' indices stay on the device when the substep reads them only there
+  const bool stay = first && rows_stay(c) && open_device().builds_contacts();
   if (first && keep_rows(c)) {
     c.same_rows = true;
   } else {
@@ -920,15 +949,20 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
     // use_opencl: the rows found on the device (the same rows; the host's search where the
     // device cannot, opencl/iterations.h)
-    const bool on_device = c.s.use_opencl &&
-                           open_device().find_neighbours(p_.data(), c.search_radius, n, c.q, neighbors_);
+    const bool on_device =
+        c.s.use_opencl &&
+        open_device().find_neighbours(p_.data(), c.search_radius, n, c.q, neighbors_, stay);
     if (!on_device)
       search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
     rows_on_device_ = on_device;
+    rows_true_radius_ = c.search_radius == radius_;
+    device_.rows_stale = on_device && stay;
+    rows_left_ += device_.rows_stale;
     rows_valid_ = false;
     if (first && c.reusable) remember_rows(c.d, c.s, c.search_radius, threads);
   }
+  if (!stay) sync_rows();  // the host reads them below or later in the substep
   // mutually constrained grains that do not collide: drop their pairs once here rather than
   // look each one up in every iteration; rows keep their order and their max_neighbors cut
   if (c.constraints_on && !c.s.collide_mutually_constrained_particles) {
@@ -937,9 +971,9 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     g.nbr_unconstrained = 1;
   }
   g.nbr_offsets = neighbors_.offsets.data();
-  g.nbr_indices = neighbors_.indices.data();
+  g.nbr_indices = device_.rows_stale ? nullptr : neighbors_.indices.data();
   if (!c.pair_friction_pass) return;
-  const size_t entries = neighbors_.indices.size();
+  const size_t entries = neighbors_.offsets.back();
   size_t longest = 0;
   for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
   // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
@@ -1060,7 +1094,7 @@ opencl::Iterations& GrainsSolver::open_device() {
 opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const {
   opencl::IterationSizes size;
   size.n = n_;
-  size.pair_entries = c.g.nbr_offsets ? neighbors_.indices.size() : 0;
+  size.pair_entries = c.g.nbr_offsets ? neighbors_.offsets.back() : 0;
   size.plane_entries = c.g.plane_offsets ? plane_offsets_[n_] : 0;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
@@ -1335,27 +1369,24 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
 }
 
 // Overlap statistics of the written positions over the neighbour rows, serial in a fixed order
-// (the same for any thread count): touching pairs, the largest and mean overlap / summed radii.
+// (the same for any thread count): touching pairs, the largest and mean overlap / summed radii
+// (gr_row_overlaps). Rows left on the device are read there, in runs added in order.
 void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const {
   const size_t n = d.n;
-  double sum = 0;
-  for (size_t i = 0; i < n; ++i) {
-    Vec3 pi = load3(d.P, i);
-    for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-      uint32_t j = neighbors_.indices[k];
-      if (j <= i) continue;
-      float rsum = radius_[i] + radius_[j];
-      const Vec3 dij = pi - load3(d.P, j);
-      if (!(dot(dij, dij) < rsum * rsum)) continue;  // apart, without a square root
-      float overlap = rsum - length(dij);
-      if (overlap <= 0) continue;
-      float pen = overlap / rsum;
-      stats->max_penetration = std::max(stats->max_penetration, pen);
-      sum += pen;
-      ++stats->contacts;
-    }
+  double contacts = 0, sum = 0;
+  float largest = 0;
+  opencl::Iterations::RowOverlaps there;
+  if (device_.rows_stale &&
+      device_.device->row_overlaps(d.P, rows_true_radius_ ? nullptr : radius_, n, &there)) {
+    contacts = there.contacts, largest = there.largest, sum = there.sum;
+  } else {
+    sync_rows();
+    gr_row_overlaps(d.P, radius_, neighbors_.offsets.data(), neighbors_.indices.data(), 0,
+                    static_cast<int>(n), &contacts, &largest, &sum);
   }
-  if (stats->contacts) stats->mean_penetration = static_cast<float>(sum / stats->contacts);
+  stats->contacts = static_cast<decltype(stats->contacts)>(contacts);
+  stats->max_penetration = largest;
+  if (contacts > 0) stats->mean_penetration = static_cast<float>(sum / contacts);
 }
 
 // The rows just built from the predicted positions p_ hold every candidate within
@@ -1384,27 +1415,26 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
   }
   // the true radii may exceed the searched ones only where they are the searched ones
   float skin = (s.neighbor_query_scale - 1) * 2 * r_min;
-  const float* p = p_.data();
-  const size_t full = s.max_neighbors > 0 ? static_cast<size_t>(s.max_neighbors) : 0;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : skin)
-  for (long i = 0; i < ln; ++i) {
-    if (full == 0 || neighbors_.count(i) < full) continue;
-    float far2 = 0;
-    for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-      const uint32_t j = neighbors_.indices[k];
-      const float x = p[3 * i] - p[3 * j], y = p[3 * i + 1] - p[3 * j + 1],
-                  z = p[3 * i + 2] - p[3 * j + 2];
-      far2 = std::max(far2, x * x + y * y + z * z);
-    }
-    skin = std::min(skin, std::sqrt(far2) - (radius_[i] + r_max));
+  // the cut rows' reach (gr_row_reach; the smallest in any order), where the rows are
+  const gr_uint full = s.max_neighbors > 0 ? static_cast<gr_uint>(s.max_neighbors) : 0u;
+  float reach = std::numeric_limits<float>::infinity();
+  if (!(device_.rows_stale &&
+        device_.device->row_reach(rows_true_radius_ ? nullptr : radius_, n, full, r_max, &reach))) {
+    sync_rows();
+    const float* p = p_.data();
+    const gr_uint* offsets = neighbors_.offsets.data();
+    const gr_uint* indices = neighbors_.indices.data();
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(min : reach)
+    for (long i = 0; i < ln; ++i)
+      gr_row_reach(p, radius_, offsets, indices, int(i), int(i) + 1, full, r_max, &reach);
   }
-  rows_skin_ = skin;
+  rows_skin_ = std::min(skin, reach);
 }
 
 // ---- checkpoint ----
 
 void GrainsSolver::save_state(StateWriter& w) const {
-  sync_contacts();  // the loads the device's list ended with
+  sync_device();  // the rows the device kept and the loads its list ended with
   w.section("grains rows");
   w.value(rows_valid_);
   w.value(rows_skin_);
@@ -1465,7 +1495,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(seq_loads_);
   index_loads();
   seq_valid_ = false;
-  device_.holds_contacts = device_.stale = false;
+  device_.holds_contacts = device_.stale = device_.rows_stale = false;
 }
 
 // ---- contact history ----

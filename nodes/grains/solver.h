@@ -149,6 +149,8 @@ class GrainsSolver {
   // gauss_seidel's lists the OpenCL device built (gauss_seidel.cpp), and the last substep's list
   // (brought from the device when it is newer there)
   size_t contact_lists_built_on_device() const { return seq_lists_device_; }
+  // use_opencl: the neighbour searches whose rows' indices stayed on the device (rows_stay)
+  size_t rows_left_on_device() const { return rows_left_; }
   const std::vector<gr_seq_contact>& contact_list() const {
     sync_contacts();
     return seq_;
@@ -157,7 +159,11 @@ class GrainsSolver {
   int stabilize_passes() const { return stabilize_passes_; }
   // The last substep's neighbour candidates (rows in the caller's grain order), or nullptr when
   // it searched none (no contacts and no clumping). Valid until the next substep.
-  const NeighborList* candidates() const { return candidates_on_ ? &neighbors_ : nullptr; }
+  const NeighborList* candidates() const {
+    if (!candidates_on_) return nullptr;
+    sync_rows();
+    return &neighbors_;
+  }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
   // until the next substep
@@ -227,13 +233,16 @@ class GrainsSolver {
   // copy of the solver opens its own. holds_contacts: the device holds the contact list from its
   // last call (a copy's device holds nothing); stale: the host's copy of it (seq_, seq_loads_)
   // is older, the device's list ending with `loaded` normal loads, and sync_contacts() brings
-  // it. A copy or move of the solver brings it first: declared before seq_ and seq_loads_, the
-  // slot is copied before them, and its copy and move call owner->sync_contacts() (owner: the
-  // solver whose substep last ran, set there; stale only after one)
+  // it. So may the neighbour rows' indices (rows_stale): the device's search left them there
+  // and the substep read them nowhere else (rows_stay), sync_rows() brings them. A copy or move
+  // of the solver brings both first: declared before neighbors_, seq_ and seq_loads_, the slot
+  // is copied before them, and its copy and move call owner->sync_device() (owner: the solver
+  // whose substep last ran, set there; stale only after one)
   struct DeviceSlot {
     std::unique_ptr<opencl::Iterations> device;
     bool holds_contacts = false;
     bool stale = false;
+    bool rows_stale = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -247,6 +256,14 @@ class GrainsSolver {
   // use_opencl: neighbors_ holds the rows the device's last search gave, unchanged (kept across
   // substeps with them), which the device's contact list build then reads where they are
   bool rows_on_device_ = false;
+  // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
+  bool rows_true_radius_ = false;
+  size_t rows_left_ = 0;
+  // neighbors_'s indices from the device (DeviceSlot::rows_stale), and both lists
+  void sync_rows() const;
+  void sync_device() const;
+  // whether this substep's rows may stay on the device: it reads them nowhere else
+  bool rows_stay(const SubstepContext& c) const;
   NeighborSearch search_;
   NeighborList neighbors_;
   // the rows' build: valid, for these grains (ids) and radii, from these predicted positions,

@@ -149,6 +149,11 @@ struct Iterations::Impl {
   Buffer nb_P, nb_radius, nb_part, nb_key, nb_count, nb_cursor, nb_grains, nb_sorted, nb_offsets,
       nb_keys, nb_indices, nb_sums;
   bool rows_found = false;  // nb_offsets and nb_indices hold the rows the last search gave
+  size_t rows_grains = 0;   // the grains of those rows
+  // what the host reads along the rows (kernels/row_stats.h): the kernels, the positions and
+  // radii they read, each run's results
+  cl_kernel row_overlaps = nullptr, row_reach = nullptr;
+  Buffer stats_P, stats_radius, stats_part;
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();
@@ -163,14 +168,16 @@ struct Iterations::Impl {
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
-                      &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums})
+                      &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
+                      &stats_radius, &stats_part})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
                         warm_apply, keep, seq_count, seq_fill, seq_blocks, seq_links,
                         seq_table, seq_lookup, seq_loaded, seq_waves, seq_wave_starts,
                         stabilize_grains, largest_part, bounds, cell_count,
-                        cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply})
+                        cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
+                        row_overlaps, row_reach})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -563,6 +563,37 @@ __kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global cons
   gr_grid_row_fill(&grid, P, radius, start, grains, sorted, i, offsets[i], offsets[i + 1], keys,
                    indices);
 }
+
+/* What the host reads along the rows (kernels/row_stats.h), run w of `runs` (grains
+ * [n w / runs, n (w + 1) / runs)) a work-item; the host combines the runs in order.
+ * gr_k_row_overlaps: touching pairs, the largest overlap and the overlaps' sum at part[3 w ...];
+ * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none) */
+#include "row_stats.h"
+
+__kernel void gr_k_row_overlaps(__global const float* P, __global const float* radius,
+                                __global const gr_uint* offsets, __global const gr_uint* indices,
+                                int n, int runs, __global double* part) {
+  const int w = (int)get_global_id(0);
+  double contacts = 0.0, sum = 0.0;
+  float largest = 0.0f;
+  if (w >= runs) return;
+  gr_row_overlaps(P, radius, offsets, indices, (int)((long)n * w / runs),
+                  (int)((long)n * (w + 1) / runs), &contacts, &largest, &sum);
+  part[3 * w] = contacts;
+  part[3 * w + 1] = (double)largest;
+  part[3 * w + 2] = sum;
+}
+
+__kernel void gr_k_row_reach(__global const float* p, __global const float* radius,
+                             __global const gr_uint* offsets, __global const gr_uint* indices,
+                             int n, int runs, gr_uint full, float r_max, __global float* part) {
+  const int w = (int)get_global_id(0);
+  float reach = INFINITY;
+  if (w >= runs) return;
+  gr_row_reach(p, radius, offsets, indices, (int)((long)n * w / runs),
+               (int)((long)n * (w + 1) / runs), full, r_max, &reach);
+  part[w] = reach;
+}
 #endif
 
 /* An exclusive prefix sum of n counts, in place, with the total at [n]: gr_k_scan_blocks sums

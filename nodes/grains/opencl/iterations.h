@@ -117,8 +117,27 @@ class Iterations {
   // NeighborSearch::find gives it, bit for bit. False when the device cannot (out's contents
   // are then unspecified): it lacks double precision (cl_khr_fp64), a radius is infinite, or
   // a buffer would exceed the device's largest.
+  // indices_there: only out's offsets come back; its indices stay on the device (out.indices
+  // left empty) until fetch_rows() brings them, and row_overlaps() and row_reach() read them
+  // there.
   bool find_neighbours(const float* P, const float* radius, size_t n, const NeighborQuery& q,
-                       NeighborList& out);
+                       NeighborList& out, bool indices_there = false);
+  // the indices of the rows the last find_neighbours() gave into out.indices (out.offsets as it
+  // gave them)
+  void fetch_rows(NeighborList& out);
+  // What the host reads along those rows (kernels/row_stats.h), computed where they are in runs
+  // of grains and combined in run order. row_overlaps: the overlap statistics of the positions
+  // P (n x 3, m, uploaded) with the radii `radius` (n, uploaded; null: the radii the search
+  // took). row_reach: the smallest reach of the rows holding `full` candidates or more, of the
+  // positions the search took and the radii `radius` (as above), r_max the largest radius;
+  // +infinity when none is full. Both false when the device holds no rows of n grains.
+  struct RowOverlaps {
+    double contacts = 0;
+    float largest = 0;
+    double sum = 0;
+  };
+  bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out);
+  bool row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach);
 
   // the Jacobi path's pre-stabilization (gr_stabilize) of the start positions x (3 n + 1
   // floats, in and out): pass after pass while go_on(pass, the largest move over a radius)

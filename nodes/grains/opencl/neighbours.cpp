@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <stdexcept>
+#include <vector>
 
 #include "nodes/grains/opencl/device_state.h"
 
@@ -86,6 +88,8 @@ void Iterations::Impl::open_neighbours() {
   cell_place = make("gr_k_cell_place");
   row_count = make("gr_k_row_count");
   row_fill = make("gr_k_row_fill");
+  row_overlaps = make("gr_k_row_overlaps");
+  row_reach = make("gr_k_row_reach");
 }
 
 void Iterations::Impl::scan(Buffer& x, size_t n) {
@@ -110,10 +114,11 @@ void Iterations::Impl::scan(Buffer& x, size_t n) {
 }
 
 bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
-                                 const NeighborQuery& q, NeighborList& out) {
+                                 const NeighborQuery& q, NeighborList& out, bool indices_there) {
   Impl& m = *impl_;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   m.rows_found = false;
+  m.rows_grains = n;
   if (n >= size_t(std::numeric_limits<int>::max()) / 3) return false;
   m.open_neighbours();
   if (!m.bounds) return false;
@@ -190,18 +195,71 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   out.offsets.resize(n + 1);
   m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
   const size_t entries = out.offsets[n];
-  out.indices.resize(entries);
-  if (entries == 0) return m.rows_found = true;
+  out.indices.resize(indices_there ? 0 : entries);
   if (entries * sizeof(gr_pair_key_t) > m.largest) {
     out.offsets.clear();
     return false;
   }
+  m.nb_indices.reserve(m.ctx, entries * u, m.largest);  // bound even when empty
+  if (entries == 0) return m.rows_found = true;
   m.nb_keys.reserve(m.ctx, entries * sizeof(gr_pair_key_t), m.largest);
-  m.nb_indices.reserve(m.ctx, entries * u, m.largest);
   arg(m.row_fill, 8, m.nb_keys), arg(m.row_fill, 9, m.nb_indices);
   m.launch(m.row_fill, n);
-  m.download(m.nb_indices, out.indices.data(), entries * u);
+  if (!indices_there) m.download(m.nb_indices, out.indices.data(), entries * u);
   m.rows_found = true;
+  return true;
+}
+
+void Iterations::fetch_rows(NeighborList& out) {
+  Impl& m = *impl_;
+  if (!m.rows_found || out.offsets.size() != m.rows_grains + 1)
+    throw std::logic_error("fetch_rows: the device holds no such rows");
+  out.indices.resize(out.offsets.back());
+  m.download(m.nb_indices, out.indices.data(), out.indices.size() * sizeof(gr_uint));
+}
+
+bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out) {
+  Impl& m = *impl_;
+  if (!m.rows_found || !m.row_overlaps || n != m.rows_grains) return false;
+  *out = RowOverlaps{};
+  if (n == 0) return true;
+  const size_t f = sizeof(float), runs = kBoundsItems;
+  m.upload(m.stats_P, P, 3 * n * f);
+  m.upload(m.stats_radius, radius, n * f);
+  m.stats_part.reserve(m.ctx, 3 * runs * sizeof(double), m.largest);
+  const int count = static_cast<int>(n), items = static_cast<int>(runs);
+  cl_kernel k = m.row_overlaps;
+  arg(k, 0, m.stats_P), arg(k, 1, radius ? m.stats_radius : m.nb_radius);
+  arg(k, 2, m.nb_offsets), arg(k, 3, m.nb_indices), arg(k, 4, count), arg(k, 5, items);
+  arg(k, 6, m.stats_part);
+  m.launch(k, runs);
+  std::vector<double> part(3 * runs);
+  m.download(m.stats_part, part.data(), part.size() * sizeof(double));
+  for (size_t w = 0; w < runs; ++w) {  // in run order: the host's sum, reassociated at the runs
+    out->contacts += part[3 * w];
+    out->largest = std::max(out->largest, static_cast<float>(part[3 * w + 1]));
+    out->sum += part[3 * w + 2];
+  }
+  return true;
+}
+
+bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach) {
+  Impl& m = *impl_;
+  if (!m.rows_found || !m.row_reach || n != m.rows_grains) return false;
+  *reach = std::numeric_limits<float>::infinity();
+  if (n == 0 || full == 0) return true;
+  const size_t runs = kBoundsItems;
+  m.upload(m.stats_radius, radius, n * sizeof(float));
+  m.stats_part.reserve(m.ctx, runs * sizeof(float), m.largest);
+  const int count = static_cast<int>(n), items = static_cast<int>(runs);
+  cl_kernel k = m.row_reach;
+  arg(k, 0, m.nb_P), arg(k, 1, radius ? m.stats_radius : m.nb_radius), arg(k, 2, m.nb_offsets);
+  arg(k, 3, m.nb_indices);
+  arg(k, 4, count), arg(k, 5, items), arg(k, 6, full), arg(k, 7, r_max), arg(k, 8, m.stats_part);
+  m.launch(k, runs);
+  std::vector<float> part(runs);
+  m.download(m.stats_part, part.data(), runs * sizeof(float));
+  for (float r : part) *reach = std::min(*reach, r);  // the smallest, in any order the same
   return true;
 }
 

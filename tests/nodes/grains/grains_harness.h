@@ -217,9 +217,12 @@ struct Scene {
 // the ground at 8 x 10 for 96 substeps (the fall moves the rows, the rest keeps them), the
 // solver's state written and read back after every substep when `round_trip` (a checkpoint,
 // which drops the list). Returns the scene; *kept is the substeps that kept the list.
-inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept) {
+// max_neighbors > 0 cuts the rows at that many candidates (the Verlet skin is then the cut
+// rows' reach).
+inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int max_neighbors = 0) {
   Scene sc;
   sc.s = settings(24, 8, 10);
+  if (max_neighbors > 0) sc.s.max_neighbors = max_neighbors;
   sc.s.contact_solver = kContactGaussSeidel;
   sc.s.use_opencl = use_opencl;
   sc.add_collider(ground());

@@ -294,6 +294,66 @@ TEST_CASE("use_opencl: the contact list the device builds is the host's, loads a
   CHECK(array(*built, "v") == array(*sent, "v"));
 }
 
+TEST_CASE(
+    "use_opencl: the neighbour rows stay on the device, and the host's reads of them are "
+    "made there",
+    "[opencl][gauss_seidel]") {
+  // When the device builds gauss_seidel's list from its own rows, nothing else in the substep
+  // reads the rows on the host: their indices stay on the device, and error control's overlap
+  // statistics (contact_stats) and the Verlet skin (remember_rows) are reduced there, run by
+  // run (kernels/row_stats.h). test::layered_drop measures the statistics after each of its 96
+  // substeps; with GRAINS_OPENCL_HOST_CONTACTS=1 the host builds the list, so the rows come back
+  // and the host measures. The skin decides when the rows are kept: the same frames, bit for
+  // bit, and the same lists kept, say the device's skin is the host's.
+  size_t kept_there = 0, kept_here = 0;
+  const test::Scene there = test::layered_drop(true, false, &kept_there);
+  const test::Scene here = [&] {
+    test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
+    return test::layered_drop(true, false, &kept_here);
+  }();
+  INFO("searches whose rows stayed on the device: " << there.solver.rows_left_on_device());
+  CHECK(there.solver.rows_left_on_device() >= 10);
+  CHECK(here.solver.rows_left_on_device() == 0);
+  CHECK(kept_there == kept_here);
+  REQUIRE(there.P == here.P);
+  CHECK(there.v == here.v);
+  // The statistics of the same positions: a pair's overlap / summed radii is
+  // (r_i + r_j - |x_ij|) / (r_i + r_j), whose rounding is a few ulp of the summed radii over
+  // them, 4 x 2^-23 < 1e-6, however the two compilers order or fuse the length's arithmetic;
+  // only pairs touching within that may count on one side alone (counted here, every pair).
+  size_t edge = 0;
+  for (size_t i = 0; i < here.size(); ++i)
+    for (size_t j = i + 1; j < here.size(); ++j) {
+      const float rsum = here.pscale[i] + here.pscale[j];
+      edge += std::fabs(rsum - length(here.pos(i) - here.pos(j))) / rsum < 1e-6f;
+    }
+  const GrainsStats &a = there.stats, &b = here.stats;
+  INFO("touching pairs " << a.contacts << " and " << b.contacts << " (" << edge
+                         << " within rounding of touching); largest overlap " << a.max_penetration
+                         << " and " << b.max_penetration << "; mean " << a.mean_penetration
+                         << " and " << b.mean_penetration);
+  REQUIRE(b.contacts > 256);  // the premise: hundreds of pairs, most grains landed
+  CHECK(std::abs(double(a.contacts) - double(b.contacts)) <= double(edge));
+  CHECK(std::fabs(a.max_penetration - b.max_penetration) <= 1e-6f);
+  CHECK(std::fabs(a.mean_penetration - b.mean_penetration) <= 1e-6f);
+  CHECK(a.mean_penetration > 0.0f);
+  // rows cut at max_neighbors, whose skin is the cut rows' reach: the same lists kept and the
+  // same frames (the premise: the cut shortens the skin, so fewer lists are kept than uncut)
+  size_t cut_there = 0, cut_here = 0;
+  const test::Scene cut = test::layered_drop(true, false, &cut_there, 4);
+  const test::Scene cut_host = [&] {
+    test::ScopedEnv host("GRAINS_OPENCL_HOST_CONTACTS", "1");
+    return test::layered_drop(true, false, &cut_here, 4);
+  }();
+  INFO("lists kept with rows cut at 4: " << cut_there << " and " << cut_here << "; uncut "
+                                         << kept_there);
+  REQUIRE(cut_here < kept_here);
+  CHECK(cut.solver.rows_left_on_device() >= 10);
+  CHECK(cut_there == cut_here);
+  CHECK(cut.P == cut_host.P);
+  CHECK(cut.v == cut_host.v);
+}
+
 TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding it gives",
           "[opencl][gauss_seidel]") {
   // While gauss_seidel keeps its contact list across substeps (the CPU path's test "... a contact

@@ -212,9 +212,10 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
 
 void Iterations::fetch_rows(NeighborList& out) {
   Impl& m = *impl_;
+  out.indices.resize(out.offsets.empty() ? 0 : out.offsets.back());
+  if (out.indices.empty()) return;  // no rows, or none the search had to fill
   if (!m.rows_found || out.offsets.size() != m.rows_grains + 1)
     throw std::logic_error("fetch_rows: the device holds no such rows");
-  out.indices.resize(out.offsets.back());
   m.download(m.nb_indices, out.indices.data(), out.indices.size() * sizeof(gr_uint));
 }
 

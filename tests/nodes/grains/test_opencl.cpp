@@ -352,6 +352,19 @@ TEST_CASE(
   CHECK(cut_there == cut_here);
   CHECK(cut.P == cut_host.P);
   CHECK(cut.v == cut_host.v);
+  // grains of no size: the device's search returns empty rows at once, and the statistics and
+  // the rows the host reads after are of no pairs (not a fetch from a search that made none)
+  test::Scene points;
+  points.s = test::settings(24, 8, 10);
+  points.s.contact_solver = kContactGaussSeidel;
+  points.s.use_opencl = true;
+  points.add_collider(test::ground());
+  for (int k = 0; k < 8; ++k) points.add({0.1f * k, 0.5f, 0.0f}, 0.0f);
+  points.substep();
+  points.substep();
+  CHECK(points.stats.contacts == 0);
+  REQUIRE(points.solver.candidates());
+  CHECK(points.solver.candidates()->indices.empty());
 }
 
 TEST_CASE("use_opencl: a contact list kept on the device gives what rebuilding it gives",

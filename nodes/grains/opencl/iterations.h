@@ -1,11 +1,12 @@
 // The parts of the substep an OpenCL device runs (a grains node with use_opencl): the neighbour
-// rows (find_neighbours()), the Jacobi path's pre-stabilization (stabilize()), iterations and
-// friction passes (run()), and contact_solver gauss_seidel's solve from its contacts on
-// (solve_sequential(): pre-stabilization, the velocity it takes back, the warm start and the
+// rows (find_neighbours()) and what the host reads along them (row_overlaps(), row_reach()),
+// the Jacobi path's pre-stabilization (stabilize()), iterations and friction passes (run()),
+// and contact_solver gauss_seidel's list (build_sequential()) and its solve from its contacts
+// on (solve_sequential(): pre-stabilization, the velocity it takes back, the warm start and the
 // passes; run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
-// (prediction, collider planes, contact history or the contact list and its carried loads;
-// velocity, final collisions, history, strain) and hands each call its inputs. The kernels call
-// the functions the CPU loops call (kernels/, engine/pair_test.h; opencl/grains.cl). Each
+// (prediction, collider planes, contact history, the contact list where the device does not
+// build it; velocity, final collisions, history, strain) and hands each call its inputs. The
+// kernels call the functions the CPU loops call (kernels/, engine/pair_test.h; grains.cl). Each
 // per-grain work-item writes only its own grain and sums in row order; each Gauss-Seidel
 // work-group sweeps one block of contacts wave by wave, its work-items sharing a wave, no two
 // blocks at once and no two contacts of a wave writing one grain; integer atomics only count: a

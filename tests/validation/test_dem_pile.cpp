@@ -6,10 +6,10 @@
 // heap stands at 55.4 deg (sector spread 5.0); frictionless, on the same base, at 27.0 deg
 // (spread 8.0): the base's pockets hold the first layer, so even frictionless grains mound
 // there (BENCHMARKS.md, against DEM).
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
+#include <future>
 
 #include "engine/dem_measures.h"
 #include "engine/graph.h"
@@ -43,7 +43,15 @@ TEST_CASE("DEM pile: the rough-base heap at the defaults, and without friction",
   // seed 4 at 56.1 (docs/heap-angle.md, "Blocks of contacts in colours"). The heap with friction
   // is two pours, the graph's seed and seed 4, its angle and peak their means and its sector
   // spread the two spreads' root mean square.
-  const HeapAngle a = pour({}), b = pour({}, 4);
+  // The three pours run side by side, each a Simulation of its own on one thread (the same
+  // frames as one after another): this is the suite's longest test, and it ends a run alone.
+  register_builtin_nodes();  // once, before the threads read the node types
+  auto second = std::async(std::launch::async, [] { return pour({}, 4); });
+  auto frictionless = std::async(std::launch::async, [] {
+    return pour({parse_override("grains.friction_with_particles=0"),
+                 parse_override("grains.friction_with_colliders=0")});
+  });
+  const HeapAngle a = pour({}), b = second.get(), f0 = frictionless.get();
   HeapAngle h = a;
   h.angle_deg = 0.5 * (a.angle_deg + b.angle_deg);
   h.spread_deg = std::sqrt(0.5 * (a.spread_deg * a.spread_deg + b.spread_deg * b.spread_deg));
@@ -52,8 +60,6 @@ TEST_CASE("DEM pile: the rough-base heap at the defaults, and without friction",
   h.sectors = std::min(a.sectors, b.sectors);
   INFO("friction 0.5, seed 5: " << a.angle_deg << " deg (sd " << a.spread_deg << "), seed 4: "
                                 << b.angle_deg << " deg (sd " << b.spread_deg << ")");
-  const HeapAngle f0 = pour({parse_override("grains.friction_with_particles=0"),
-                             parse_override("grains.friction_with_colliders=0")});
   INFO("friction 0.5: " << h.angle_deg << " deg (sd " << h.spread_deg << " over " << h.sectors
                         << " sectors), cone " << h.cone_deg << ", peak " << h.peak
                         << " m; DEM " << kDemAngle << " (sd " << kDemSpread << ")");

@@ -6,8 +6,9 @@
 // heap stands at 55.4 deg (sector spread 5.0); frictionless, on the same base, at 27.0 deg
 // (spread 8.0): the base's pockets hold the first layer, so even frictionless grains mound
 // there (BENCHMARKS.md, against DEM).
-#include <algorithm>
 #include <catch2/catch.hpp>
+
+#include <algorithm>
 #include <cmath>
 #include <future>
 

@@ -2,7 +2,7 @@
  * overlap statistics error control measures (GrainsSolver::contact_stats) and the reach of the
  * rows cut at max_neighbors (the Verlet skin, GrainsSolver::remember_rows). The CPU takes all
  * grains as one run; a device takes runs in parallel and the host combines them in run order
- * (opencl/rows.cpp), so that neither the rows nor a serial pass over them crosses to the host.
+ * (opencl/neighbours.cpp), so that neither the rows nor a serial pass over them crosses to the host.
  *
  * Overlap of a touching pair (i < j, each pair once, from i's row): (r_i + r_j - |x_ij|) /
  * (r_i + r_j). Reach of a full row: its farthest candidate's distance beyond r_i + r_max. Needs

@@ -96,6 +96,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const int ni = static_cast<int>(n);
   float* p = p_.data();
   const float* P = c.g.P;
+  const float* const start = P;  // the substep's start before pre-stabilization
   const float dt = prm.dt;
 
   // the contacts: each grain pair once (from the lower index's row), then each grain's planes;
@@ -297,19 +298,25 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // for two frames and ran the column out 0.93 L0 instead of 0.86
   if (c.s.pre_stabilization) {
     const int most_passes = warm ? kStabilizeIterations : kColdStabilizeIterations;
-    P_stable_.assign(P, P + 3 * n);
-    P_stable_.push_back(0.0f);
+    // (the device starts from its own copy of P, and sums the carried moves there)
+    if (device) {
+      P_stable_.resize(3 * n + 1);
+      P_stable_[3 * n] = 0.0f;
+    } else {
+      P_stable_.assign(P, P + 3 * n);
+      P_stable_.push_back(0.0f);
+    }
     float* x = P_stable_.data();
     // what the contacts that carried a load moved each grain (the velocity it came with, below)
     const bool made = warm && !c.s.keep_velocity;
-    if (made) carried_move_.assign(3 * n, 0.0f);
+    if (made && !device) carried_move_.assign(3 * n, 0.0f);
     float* moved_by_carried = carried_move_.data();
     if (device) {
       on_device.most = most_passes;
       on_device.go_on = go_on;
       on_device.x = x;
       if (made) {
-        on_device.carried = moved_by_carried;
+        on_device.take_back = true;
         on_device.v = c.d.v;
         on_device.inv_last = 1.0f / seq_dt_;
       }
@@ -434,12 +441,14 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     on.keep_warm = warm;
     on.keep_scale = scale;
     on.relax = relax;
+    on_device.p_there = p_on_device_;
     on.others = other_groups ? &others : nullptr;
     on.others_prm = &others_prm;
     opencl::Iterations& cl = open_device();
     opencl::IterationSizes size = device_sizes(c);
     // the contacts' kernels read no neighbour rows: only clumping's Jacobi group does
     gr_grains gd = g;
+    gd.P = start;  // the device pre-stabilizes its own copy of the start
     if (!others.nbr_offsets) gd.nbr_offsets = gd.nbr_indices = nullptr, size.pair_entries = 0;
     if (!c.shapes_on) {
       cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);

@@ -650,6 +650,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
+  p_on_device_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   if (d.n == 0) return;
@@ -956,6 +957,7 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
       search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
     rows_on_device_ = on_device;
+    p_on_device_ = first && on_device;
     rows_true_radius_ = c.search_radius == radius_;
     device_.rows_stale = on_device && stay;
     rows_left_ += device_.rows_stale;

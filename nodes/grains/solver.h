@@ -256,6 +256,9 @@ class GrainsSolver {
   // use_opencl: neighbors_ holds the rows the device's last search gave, unchanged (kept across
   // substeps with them), which the device's contact list build then reads where they are
   bool rows_on_device_ = false;
+  // this substep's predicted positions p_ went to the device with its search, unchanged since
+  // (the solve then copies them there rather than sending them again)
+  bool p_on_device_ = false;
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;

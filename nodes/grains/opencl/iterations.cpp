@@ -452,7 +452,16 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   HostArray inputs[kArrays];
   // a list built on the device came with the same grains' arrays (build_sequential), all but
   // the rows, which clumping reads from these
-  m.upload_grains(g, size, p, inputs, s.built);
+  const bool p_there = w.p_there && m.rows_grains == n;
+  m.upload_grains(g, size, p_there ? nullptr : p, inputs, s.built);
+  if (p_there) {  // one float past the last grain, as an upload of p has
+    const float zero = 0.0f;
+    m.p.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+    check(clEnqueueCopyBuffer(m.queue, m.nb_P.mem, m.p.mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+    check(clEnqueueFillBuffer(m.queue, m.p.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+  }
   const bool contacts = s.count > 0;
   // whether the contacts carry loads (the warm start runs): the host's flags, or with a
   // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded
@@ -475,16 +484,29 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   // pre-stabilization: x, p, carried, carried_flag, seq, block_wave, blocks, first, count, base,
   // most, wave_start, part
   if (w.x) {
-    m.upload(m.stable, w.x, (3 * n + 1) * f);
-    m.upload(m.carried, w.carried, 3 * n * f);
+    // the start as it went up, and no carried move yet: made here, not sent (one float past
+    // the last grain, as the host's copy had)
+    const float zero = 0.0f;
+    m.stable.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+    check(clEnqueueCopyBuffer(m.queue, m.arrays[kP].mem, m.stable.mem, 0, 0, 3 * n * f, 0, nullptr,
+                              nullptr),
+          "clEnqueueCopyBuffer");
+    check(clEnqueueFillBuffer(m.queue, m.stable.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    if (w.take_back) {
+      m.carried.reserve(m.ctx, 3 * n * f, m.largest);
+      check(
+          clEnqueueFillBuffer(m.queue, m.carried.mem, &zero, f, 0, 3 * n * f, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    }
     if (contacts && w.most > 0) {
       cl_kernel k = m.kernel(m.stabilize, "gr_k_stabilize");
       m.block_most.reserve(m.ctx, s.blocks * f, m.largest);
       m.set_grains(k, prm, g, inputs);
       set_buffer(k, kFirstOwn, &m.stable);
       set_buffer(k, kFirstOwn + 1, &m.p);
-      set_buffer(k, kFirstOwn + 2, w.carried ? &m.carried : nullptr);
-      set_buffer(k, kFirstOwn + 3, w.carried && loaded ? &m.carried_flag : nullptr);
+      set_buffer(k, kFirstOwn + 2, w.take_back ? &m.carried : nullptr);
+      set_buffer(k, kFirstOwn + 3, w.take_back && loaded ? &m.carried_flag : nullptr);
       set_buffer(k, kFirstOwn + 5, &m.block_wave);
       set_buffer(k, kFirstOwn + 6, &m.colour_blocks);
       set_buffer(k, kFirstOwn + 10, &m.block_most);
@@ -503,9 +525,9 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     }
   }
   // the velocity pre-stabilization takes back: v, p, carried, inv_last, n
-  const bool velocities = w.carried || (contacts && loaded);
+  const bool velocities = w.take_back || (contacts && loaded);
   if (velocities) m.upload(m.velocity, w.v ? w.v : g.v, 3 * n * f);
-  if (w.x && w.carried) {
+  if (w.x && w.take_back) {
     cl_kernel k = m.kernel(m.take_back, "gr_k_warm_take_back");
     m.set_grains(k, prm, g, inputs);
     set_buffer(k, kFirstOwn, &m.velocity);
@@ -607,7 +629,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
   m.download(*result, p, 3 * n * f);
   if (w.x) m.download(m.stable, w.x, 3 * n * f);
-  if (w.carried) m.download(m.velocity, w.v, 3 * n * f);
+  if (w.take_back) m.download(m.velocity, w.v, 3 * n * f);
   if (!s.stay) m.download_contacts(s);
   if (s.loaded) {
     gr_uint count_loaded = 0;

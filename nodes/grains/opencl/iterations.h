@@ -75,19 +75,23 @@ struct SequentialContacts {
 
 // What contact_solver gauss_seidel's device solve does before its passes (solve_sequential)
 struct SequentialSolve {
-  // pre-stabilization (gr_seq_stabilize) of the start positions x (3 n + 1 floats, in and out,
-  // null: none) and p, pass after pass while go_on(pass, the pass's largest move) says so, at
-  // most `most` passes
+  // pre-stabilization (gr_seq_stabilize) of the start positions and p, pass after pass while
+  // go_on(pass, the pass's largest move) says so, at most `most` passes; x (3 n floats, out
+  // only, null: none) receives the pre-stabilized start, which begins on the device as a copy
+  // of g.P there
   float* x = nullptr;
   int most = 0;
   std::function<bool(int, float)> go_on;
   // a byte a contact, 1 when it carries a load (waiting in its accumulators, scaled to this
   // substep): the warm start runs when set (kernels/warm.h)
   const uint8_t* loaded = nullptr;
-  // what the loaded contacts' pre-stabilization moved each grain (3 n floats, zero in), and the
-  // velocities (3 n, in and out) it takes back (gr_warm_take_back, 1 / dt_last inv_last): null
-  // when nothing is taken back
-  float* carried = nullptr;
+  // p_there: p (as it comes in) is the positions the device's last find_neighbours() took, which
+  // are copied there rather than sent again
+  bool p_there = false;
+  // take_back: what the loaded contacts' pre-stabilization moved each grain is summed on the
+  // device (from zero, there), and the velocity it made taken back from v (3 n floats, in and
+  // out; gr_warm_take_back, 1 / dt_last inv_last)
+  bool take_back = false;
   float* v = nullptr;
   float inv_last = 0.0f;
 };

@@ -456,6 +456,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       gr_grains unpinned = gd;
       unpinned.targetP = nullptr;
       cl.solve_sequential(unpinned, prm, size, p_.data(), on, on_device, 0);
+      unpinned.P = g.P;  // the passes' start: pre-stabilization's, which the solve brought back
       for (int it = 0; it < c.iterations; ++it) {
         cl.run_sequential(unpinned, prm, size, p_.data(), on, 1);
         project_shapes(g, prm, c.threads);

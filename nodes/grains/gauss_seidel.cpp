@@ -453,15 +453,23 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     if (!c.shapes_on) {
       cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);
     } else {
+      // the contacts and the grains' arrays stay on the device between the passes (only the
+      // positions cross for the shapes' projections here); the contacts come back once, after
+      // the last pass
       gr_grains unpinned = gd;
       unpinned.targetP = nullptr;
-      cl.solve_sequential(unpinned, prm, size, p_.data(), on, on_device, 0);
+      opencl::SequentialContacts kept = on;
+      kept.stay = true;
+      kept.loaded = nullptr;
+      cl.solve_sequential(unpinned, prm, size, p_.data(), kept, on_device, 0);
       unpinned.P = g.P;  // the passes' start: pre-stabilization's, which the solve brought back
+      kept.there = true;
       for (int it = 0; it < c.iterations; ++it) {
-        cl.run_sequential(unpinned, prm, size, p_.data(), on, 1);
+        cl.run_sequential(unpinned, prm, size, p_.data(), kept, 1);
         project_shapes(g, prm, c.threads);
         if (g.targetP) project_pins(c);
       }
+      cl.fetch_contacts(on);
     }
     p = p_.data();
     device_.stale = on.stay;

@@ -308,11 +308,18 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
   const size_t n = size.n;
   if (n == 0) return;
   HostArray inputs[kArrays];
-  m.upload_grains(g, size, p, inputs);
-  m.upload_contacts(s);
+  if (s.there) {
+    const size_t bytes = (3 * n + 1) * sizeof(float);
+    grain_arrays(g, size, inputs);
+    m.upload(m.p, p, bytes);
+    m.next.reserve(m.ctx, bytes, m.largest);
+  } else {
+    m.upload_grains(g, size, p, inputs);
+    m.upload_contacts(s);
+  }
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
   m.download(*result, p, 3 * n * sizeof(float));
-  m.download_contacts(s);
+  if (!(s.there && s.stay)) m.download_contacts(s);
 }
 
 void Iterations::Impl::download_contacts(const SequentialContacts& s) {

@@ -69,6 +69,10 @@ struct SequentialContacts {
   // of them end with a normal load
   bool stay = false;
   size_t* loaded = nullptr;
+  // run_sequential() only: the contacts, their blocks and waves and g's arrays are on the device
+  // as the last call left them (with `stay`): only p goes up (and, with `stay`, the contacts
+  // stay there after the passes too)
+  bool there = false;
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;
 };
@@ -113,7 +117,8 @@ class Iterations {
            const gr_normal_sums& acc, int iterations, bool friction_pass, bool accurate_friction);
 
   // `iterations` passes of contact_solver gauss_seidel on p (3 n + 1 floats, in and out): each
-  // the others' Jacobi group, then the contacts colour by colour, then the pins (g.targetP)
+  // the others' Jacobi group, then the contacts colour by colour, then the pins (g.targetP);
+  // s.contacts in and out, unless s.there and s.stay keep them on the device
   void run_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
                       const SequentialContacts& s, int iterations);
 

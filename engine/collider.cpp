@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/collider_shape.h"
 #include "engine/mesh_shape.h"
 
 namespace grains {
@@ -45,80 +46,111 @@ Pose Pose::from_trs(const Vec3& translate, const Vec3& rotate_deg, float scale) 
   return p;
 }
 
+// The analytic shapes and the poses are engine/collider_shape.h's, which an OpenCL device
+// compiles too: the two find the same floats.
+static_assert(int(ShapeKind::Plane) == GR_SHAPE_PLANE && int(ShapeKind::Box) == GR_SHAPE_BOX &&
+                  int(ShapeKind::Sphere) == GR_SHAPE_SPHERE &&
+                  int(ShapeKind::Torus) == GR_SHAPE_TORUS &&
+                  int(ShapeKind::Capsule) == GR_SHAPE_CAPSULE &&
+                  int(ShapeKind::Mesh) == GR_SHAPE_MESH,
+              "ShapeKind in collider_shape.h's order");
+static_assert(sizeof(gr_collider) == 136, "the same layout on the host and a device");
+
+gr_pose to_gr(const Pose& q) {
+  gr_pose g;
+  for (int k = 0; k < 9; ++k) g.R[k] = q.R[k];
+  g.t[0] = q.t.x, g.t[1] = q.t.y, g.t[2] = q.t.z;
+  g.s = q.s;
+  return g;
+}
+
+gr_shape to_gr(const Shape& sh) {
+  gr_shape g;
+  g.kind = static_cast<int>(sh.kind);
+  g.size[0] = sh.size.x, g.size[1] = sh.size.y, g.size[2] = sh.size.z;
+  g.radius = sh.radius;
+  g.tube = sh.tube;
+  g.height = sh.height;
+  return g;
+}
+
+gr_collider to_gr(const ColliderState& c) {
+  gr_collider g;
+  g.shape = to_gr(c.shape);
+  g.pose = to_gr(c.pose);
+  g.prev = to_gr(c.prev_pose);
+  g.dt = c.dt;
+  return g;
+}
+
+namespace {
+Vec3 vec(const float* a) {
+  return {a[0], a[1], a[2]};
+}
+}  // namespace
+
 Vec3 Pose::rotate(const Vec3& d) const {
-  return {R[0] * d.x + R[1] * d.y + R[2] * d.z, R[3] * d.x + R[4] * d.y + R[5] * d.z,
-          R[6] * d.x + R[7] * d.y + R[8] * d.z};
+  const gr_pose g = to_gr(*this);
+  const float in[3] = {d.x, d.y, d.z};
+  float out[3];
+  gr_pose_rotate(&g, in, out);
+  return vec(out);
 }
 Vec3 Pose::unrotate(const Vec3& d) const {
-  return {R[0] * d.x + R[3] * d.y + R[6] * d.z, R[1] * d.x + R[4] * d.y + R[7] * d.z,
-          R[2] * d.x + R[5] * d.y + R[8] * d.z};
+  const gr_pose g = to_gr(*this);
+  const float in[3] = {d.x, d.y, d.z};
+  float out[3];
+  gr_pose_unrotate(&g, in, out);
+  return vec(out);
 }
-Vec3 Pose::apply(const Vec3& local) const { return t + rotate(local) * s; }
-Vec3 Pose::inverse(const Vec3& world) const { return unrotate(world - t) / s; }
+Vec3 Pose::apply(const Vec3& local) const {
+  const gr_pose g = to_gr(*this);
+  const float in[3] = {local.x, local.y, local.z};
+  float out[3];
+  gr_pose_apply(&g, in, out);
+  return vec(out);
+}
+Vec3 Pose::inverse(const Vec3& world) const {
+  const gr_pose g = to_gr(*this);
+  const float in[3] = {world.x, world.y, world.z};
+  float out[3];
+  gr_pose_inverse(&g, in, out);
+  return vec(out);
+}
 
 float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal, float within) {
-  switch (sh.kind) {
-    case ShapeKind::Plane:
-      if (normal) *normal = {0, 1, 0};
-      return p.y;
-    case ShapeKind::Sphere: {
-      float l = length(p);
-      if (normal) *normal = l > 0 ? p / l : Vec3{0, 1, 0};
-      return l - sh.radius;
-    }
-    case ShapeKind::Box: {
-      Vec3 h = sh.size * 0.5f;
-      Vec3 q{std::fabs(p.x) - h.x, std::fabs(p.y) - h.y, std::fabs(p.z) - h.z};
-      Vec3 qo{std::max(q.x, 0.0f), std::max(q.y, 0.0f), std::max(q.z, 0.0f)};
-      float outside = length(qo);
-      float inside = std::min(std::max(q.x, std::max(q.y, q.z)), 0.0f);
-      if (normal) {
-        Vec3 n;
-        if (outside > 0) {
-          n = qo / outside;
-        } else {  // inside: push out through the nearest face
-          int a = (q.x >= q.y && q.x >= q.z) ? 0 : (q.y >= q.z ? 1 : 2);
-          n[a] = 1;
-        }
-        *normal = Vec3{p.x < 0 ? -n.x : n.x, p.y < 0 ? -n.y : n.y, p.z < 0 ? -n.z : n.z};
-      }
-      return outside + inside;
-    }
-    case ShapeKind::Torus: {
-      float lxz = std::sqrt(p.x * p.x + p.z * p.z);
-      Vec3 ring = lxz > 0 ? Vec3{p.x / lxz * sh.radius, 0, p.z / lxz * sh.radius}
-                          : Vec3{sh.radius, 0, 0};
-      Vec3 d = p - ring;
-      float l = length(d);
-      if (normal) *normal = l > 0 ? d / l : Vec3{0, 1, 0};
-      return l - sh.tube;
-    }
-    case ShapeKind::Capsule: {
-      float hy = sh.height * 0.5f;
-      Vec3 c{0, std::clamp(p.y, -hy, hy), 0};
-      Vec3 d = p - c;
-      float l = length(d);
-      if (normal) *normal = l > 0 ? d / l : Vec3{1, 0, 0};
-      return l - sh.radius;
-    }
-    case ShapeKind::Mesh:
-      if (!sh.mesh) break;
-      return sh.mesh->distance(p, normal, within);
-  }
-  if (normal) *normal = {0, 1, 0};
-  return 1e30f;
+  if (sh.kind == ShapeKind::Mesh && sh.mesh) return sh.mesh->distance(p, normal, within);
+  const gr_shape g = to_gr(sh);
+  const float at[3] = {p.x, p.y, p.z};
+  float n[3];
+  const float d = gr_shape_distance(&g, at, normal ? n : nullptr);
+  if (normal) *normal = vec(n);
+  return d;
 }
 
 float ColliderState::distance(const Vec3& p, Vec3* normal, float within) const {
-  Vec3 nl;
-  float d = shape_distance(shape, pose.inverse(p), normal ? &nl : nullptr, within / pose.s) * pose.s;
-  if (normal) *normal = pose.rotate(nl);
+  if (shape.kind == ShapeKind::Mesh) {
+    Vec3 nl;
+    float d =
+        shape_distance(shape, pose.inverse(p), normal ? &nl : nullptr, within / pose.s) * pose.s;
+    if (normal) *normal = pose.rotate(nl);
+    return d;
+  }
+  const gr_shape sh = to_gr(shape);
+  const gr_pose q = to_gr(pose);
+  const float at[3] = {p.x, p.y, p.z};
+  float n[3];
+  const float d = gr_placed_distance(&sh, &q, at, normal ? n : nullptr);
+  if (normal) *normal = vec(n);
   return d;
 }
 
 Vec3 ColliderState::velocity_at(const Vec3& p) const {
-  if (dt <= 0) return {0, 0, 0};
-  return (p - carried_back(p)) / dt;
+  const gr_collider g = to_gr(*this);
+  const float at[3] = {p.x, p.y, p.z};
+  float v[3];
+  gr_collider_velocity(&g, at, v);
+  return vec(v);
 }
 
 bool ColliderState::shell() const {

@@ -6,6 +6,7 @@
 #include <memory>
 #include <string>
 
+#include "engine/collider_shape.h"
 #include "engine/vec3.h"
 
 namespace grains {
@@ -79,5 +80,11 @@ struct ColliderState {
   // True when the collider did not move over the substep (same pose, bit for bit).
   bool still() const;
 };
+
+// The shared definitions' (engine/collider_shape.h) forms of a pose, a shape and a collider
+// over a substep (a mesh keeps only its kind there).
+gr_pose to_gr(const Pose& q);
+gr_shape to_gr(const Shape& sh);
+gr_collider to_gr(const ColliderState& c);
 
 }  // namespace grains

@@ -192,6 +192,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       // grain by grain (gr_seq_build, which a device's build calls too), through a scratch row
       const int* ids = c.d.id;
       const int* collider_of = plane_collider_.data();
+      sync_planes();  // the entries the device's planes left there
+      c.g.plane = plane_.data();
       for (int i = 0; i < ni; ++i) {
         const size_t row = (pairs ? g.nbr_offsets[i + 1] - g.nbr_offsets[i] : 0) +
                            (g.plane_offsets ? g.plane_offsets[i + 1] - g.plane_offsets[i] : 0);

@@ -424,6 +424,7 @@ void GrainsSolver::shape_goals(const float* p, int threads) {
 // The penetration the shift removes joins each contact's normal sum (the bound of its friction),
 // and the contacts' slip is then taken out of the body as a whole (rigid_collider_friction).
 void GrainsSolver::project_shapes(const gr_grains& g, const gr_params& prm, int threads) {
+  sync_planes();
   shape_goals(p_.data(), threads);
   p_.swap(shape_goal_);
   if (plane_offsets_.size() != n_ + 1) return;
@@ -529,79 +530,6 @@ void GrainsSolver::rigid_collider_friction(size_t c, const gr_grains& g, const g
   }
 }
 
-void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origin,
-                               const ColliderState* colliders, size_t collider_count,
-                               float query_scale, int threads) {
-  const long n = static_cast<long>(n_);
-  const float* radius = radius_;
-  // Range: a collider is a candidate when its surface is within query_scale * r of the predicted
-  // centre, widened by the substep's motion |p - P| so that a grain the iterations push back
-  // toward where it came from still finds the surface it moved away from. Up to GR_MAX_PLANES
-  // candidates are kept, nearest first (ties by collider order). Two passes: count (row sizes),
-  // then fill the compact rows; each grain writes only its own row. A fixed grain (mass 0) has
-  // none: nothing moves it, a collider through it neither.
-  auto nearest = [&](long i, float* dist, Vec3* nrm, int32_t* idx) {
-    if (!(inv_mass_[i] > 0.0f)) return 0;
-    Vec3 x = load3(p, i) + origin;  // colliders live in world space
-    float range = query_scale * radius[i] + length(load3(p, i) - load3(P, i));
-    int count = 0;
-    for (size_t c = 0; c < collider_count; ++c) {
-      Vec3 nc;
-      float d = colliders[c].distance(x, &nc, range);
-      if (!(d < range)) continue;
-      // insertion into the nearest-first list
-      int at = count < GR_MAX_PLANES ? count : GR_MAX_PLANES;
-      while (at > 0 && d < dist[at - 1]) --at;
-      if (at >= GR_MAX_PLANES) continue;
-      int last = std::min(count, GR_MAX_PLANES - 1);
-      for (int k = last; k > at; --k) {
-        dist[k] = dist[k - 1];
-        nrm[k] = nrm[k - 1];
-        idx[k] = idx[k - 1];
-      }
-      dist[at] = d;
-      nrm[at] = nc;
-      idx[at] = static_cast<int32_t>(c);
-      count = std::min(count + 1, GR_MAX_PLANES);
-    }
-    return count;
-  };
-  plane_offsets_.resize(n + 1);
-  uint32_t* offsets = plane_offsets_.data();
-  offsets[0] = 0;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < n; ++i) {
-    float dist[GR_MAX_PLANES];
-    Vec3 nrm[GR_MAX_PLANES];
-    int32_t idx[GR_MAX_PLANES];
-    offsets[i + 1] = static_cast<uint32_t>(nearest(i, dist, nrm, idx));
-  }
-  for (long i = 0; i < n; ++i) offsets[i + 1] += offsets[i];
-  // the fall's wide ranges (|p - P| above) can make many more rows than a resting pile keeps
-  resize_for_rewrite(plane_, 9 * size_t(offsets[n]));
-  resize_for_rewrite(plane_collider_, offsets[n]);
-  float* plane = plane_.data();
-  int32_t* which = plane_collider_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < n; ++i) {
-    if (offsets[i + 1] == offsets[i]) continue;
-    float dist[GR_MAX_PLANES];
-    Vec3 nrm[GR_MAX_PLANES];
-    int32_t idx[GR_MAX_PLANES];
-    const int count = nearest(i, dist, nrm, idx);
-    Vec3 x = load3(p, i);
-    for (int k = 0; k < count; ++k) {
-      const uint32_t e = offsets[i] + k;
-      Vec3 xs = x - nrm[k] * dist[k];  // in the substep's coordinates
-      Vec3 vc = colliders[idx[k]].velocity_at(xs + origin);
-      which[e] = idx[k];
-      store3(plane + 9 * e, 0, xs);
-      store3(plane + 9 * e, 1, nrm[k]);
-      store3(plane + 9 * e, 2, vc);
-    }
-  }
-}
-
 GrainsSolver::DeviceSlot::DeviceSlot() = default;
 GrainsSolver::DeviceSlot::~DeviceSlot() = default;
 GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
@@ -610,7 +538,7 @@ GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& o) {
   if (o.owner) o.owner->sync_device();
   device.reset();
-  holds_contacts = stale = rows_stale = false;
+  holds_contacts = stale = rows_stale = planes_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -627,7 +555,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   if (o.owner) o.owner->sync_device();
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
-  stale = rows_stale = false;
+  stale = rows_stale = planes_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -641,8 +569,16 @@ void GrainsSolver::sync_rows() const {
   self.device_.rows_stale = false;
 }
 
+void GrainsSolver::sync_planes() const {
+  if (!device_.planes_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_planes(&self.plane_);
+  self.device_.planes_stale = false;
+}
+
 void GrainsSolver::sync_device() const {
   sync_rows();
+  sync_planes();
   sync_contacts();
 }
 
@@ -650,7 +586,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
-  p_on_device_ = false;
+  p_on_device_ = planes_on_device_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   if (d.n == 0) return;
@@ -1027,8 +963,12 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
     if (friction) prev_collider_normal_.swap(collider_normal_);
     if (friction) old_slip.swap(plane_slip_);
   }
+  DevicePlanes device;
+  device.p_there = first && p_on_device_;
+  device.radius_there = device.p_there && rows_true_radius_;
+  device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
   find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
-              c.threads);
+              c.threads, c.s.use_opencl ? &device : nullptr);
   g.plane_offsets = plane_offsets_.data();
   g.plane = plane_.data();
   if (friction) {
@@ -1098,6 +1038,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.n = n_;
   size.pair_entries = c.g.nbr_offsets ? neighbors_.offsets.back() : 0;
   size.plane_entries = c.g.plane_offsets ? plane_offsets_[n_] : 0;
+  size.planes_there = planes_on_device_;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;
@@ -1316,6 +1257,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
                               const gr_params& prm, const ColliderState* colliders,
                               size_t collider_count, const Vec3& origin, bool impacts,
                               int threads) {
+  if (impacts) sync_planes();
   const long ln = static_cast<long>(d.n);
   const bool colliders_on = collider_count > 0;
   const float* p = p_.data();
@@ -1560,6 +1502,7 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
 void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
                                 const gr_params& prm, const float* p, bool pairs, bool planes,
                                 int threads) {
+  if (planes) sync_planes();
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
   const float dt = s.dt;

@@ -164,6 +164,20 @@ class GrainsSolver {
     sync_rows();
     return &neighbors_;
   }
+  // The last substep's collider planes as the iterations last took them (kernels/planes.h):
+  // each grain's first entry (n + 1; empty without colliders), the entries (9 floats each) and
+  // their colliders. Valid until the next substep.
+  struct PlaneRows {
+    const std::vector<uint32_t>* offsets;
+    const std::vector<float>* plane;
+    const std::vector<int32_t>* collider;
+  };
+  PlaneRows collider_planes() const {
+    sync_planes();
+    return {&plane_offsets_, &plane_, &plane_collider_};
+  }
+  // use_opencl: the collider plane searches the device ran (planes.cpp)
+  size_t planes_found_on_device() const { return planes_device_; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
   // until the next substep
@@ -182,10 +196,17 @@ class GrainsSolver {
   // planes and the friction attribute)
   void project_shapes(const gr_grains& g, const gr_params& prm, int threads);
   void rigid_collider_friction(size_t component, const gr_grains& g, const gr_params& prm, float* p);
-  // P, p in the substep's coordinates, world = those + origin
+  // P, p in the substep's coordinates, world = those + origin (planes.cpp). device: found on
+  // the OpenCL device when every collider is analytic; p_there: p is the positions the device's
+  // search took, radius_there: radius_ its radii
+  // entries_stay: the host reads no entry this substep but through sync_planes (a gauss_seidel
+  // list the device builds, no impact data, no rigid shapes)
+  struct DevicePlanes {
+    bool p_there = false, radius_there = false, entries_stay = false;
+  };
   void find_planes(const float* P, const float* p, const Vec3& origin,
                    const ColliderState* colliders, size_t collider_count, float query_scale,
-                   int threads);
+                   int threads, const DevicePlanes* device);
 
   // contact history (friction anchors): each contact's slip its friction has not yet removed,
   // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
@@ -243,6 +264,7 @@ class GrainsSolver {
     bool holds_contacts = false;
     bool stale = false;
     bool rows_stale = false;
+    bool planes_stale = false;  // plane_'s entries are the device's (find_planes' entries_stay)
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -262,8 +284,12 @@ class GrainsSolver {
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;
-  // neighbors_'s indices from the device (DeviceSlot::rows_stale), and both lists
+  // the device holds this substep's collider planes (find_planes): they do not go up again
+  bool planes_on_device_ = false;
+  // neighbors_'s indices from the device (DeviceSlot::rows_stale), plane_'s entries
+  // (DeviceSlot::planes_stale), and all of these with the contact list
   void sync_rows() const;
+  void sync_planes() const;
   void sync_device() const;
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;
@@ -393,7 +419,9 @@ class GrainsSolver {
   // collider planes, a compact row per grain (at most GR_MAX_PLANES, nearest first)
   std::vector<uint32_t> plane_offsets_;  // (n + 1)
   std::vector<float> plane_;             // (entries x 9): surface point, normal, velocity
+  size_t planes_device_ = 0;             // planes_found_on_device()
   std::vector<int32_t> plane_collider_;  // (entries): collider index of each plane
+  std::vector<gr_collider> plane_colliders_;  // the substep's colliders (find_planes)
   // explicit constraints: per-grain rows of (other endpoint, primitive), rebuilt each substep
   std::vector<uint32_t> con_offsets_;      // (n + 1)
   std::vector<uint32_t> con_other_, con_prim_;  // (2 m)

@@ -154,6 +154,13 @@ struct Iterations::Impl {
   // radii they read, each run's results
   cl_kernel row_overlaps = nullptr, row_reach = nullptr;
   Buffer stats_P, stats_radius, stats_part;
+  // the collider planes (planes.cpp): the kernels, the colliders, the start and predicted
+  // positions, radii and inverse masses they read (the predicted positions and radii the
+  // search's nb_P and nb_radius when it took these); the rows and entries go to
+  // arrays[kPlaneOffsets], arrays[kPlane] and plane_collider
+  cl_kernel plane_count = nullptr, plane_fill = nullptr;
+  Buffer plane_colliders, plane_P, plane_p, plane_radius, plane_inv_mass;
+  size_t plane_entries = 0;  // the entries the last find_planes found
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();
@@ -169,7 +176,8 @@ struct Iterations::Impl {
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
-                      &stats_radius, &stats_part})
+                      &stats_radius, &stats_part, &plane_colliders, &plane_P, &plane_p,
+                      &plane_radius, &plane_inv_mass})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -177,7 +185,7 @@ struct Iterations::Impl {
                         seq_table, seq_lookup, seq_loaded, seq_waves, seq_wave_starts,
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
-                        row_overlaps, row_reach})
+                        row_overlaps, row_reach, plane_count, plane_fill})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

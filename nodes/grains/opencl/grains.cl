@@ -11,6 +11,7 @@
 #include "mass_shock.h"
 #include "params.h"
 #include "pin.h"
+#include "planes.h"
 #include "sequential.h"
 #include "velocity.h"
 #include "warm.h"
@@ -629,4 +630,60 @@ __kernel void gr_k_scan_apply(__global gr_uint* x, int n, int block, __global co
   end = min(n, (b + 1) * block);
   for (k = b * block; k < end; ++k) v = x[k], x[k] = total, total += v;
   if (b == blocks - 1) x[n] = sums[blocks];
+}
+
+/* The collider planes (kernels/planes.h): a work-item a grain, gr_k_plane_count counts its
+ * planes into count[i] (the host's scan turns the counts into offsets), gr_k_plane_fill writes
+ * them from offsets[i] on: the surface point, normal and the collider's velocity there (9
+ * floats an entry) and the collider. A grain's row is the CPU's, bit for bit (no contraction,
+ * engine/collider_shape.h). */
+#define GR_PLANE_ARGS                                                                        \
+  __global const gr_collider *colliders, int count, float ox, float oy, float oz,            \
+      float query_scale, __global const float *P, __global const float *p,                   \
+      __global const float *radius, __global const float *inv_mass, int n
+
+/* grain i's planes into dist, nrm, idx, and p's copy into pi; returns how many */
+GR_INLINE int gr_device_planes(__global const gr_collider* colliders, int count, float ox,
+                               float oy, float oz, float query_scale, __global const float* P,
+                               __global const float* p, __global const float* radius,
+                               __global const float* inv_mass, int i, float* pi, float* dist,
+                               float* nrm, int* idx) {
+  const float origin[3] = {ox, oy, oz};
+  const float Pi[3] = {P[3 * i], P[3 * i + 1], P[3 * i + 2]};
+  pi[0] = p[3 * i], pi[1] = p[3 * i + 1], pi[2] = p[3 * i + 2];
+  return gr_plane_nearest(colliders, count, origin, query_scale, radius[i], inv_mass[i], pi, Pi,
+                          dist, nrm, idx);
+}
+
+__kernel void gr_k_plane_count(GR_PLANE_ARGS, __global gr_uint* counts) {
+  const int i = (int)get_global_id(0);
+  float pi[3], dist[GR_MAX_PLANES], nrm[3 * GR_MAX_PLANES];
+  int idx[GR_MAX_PLANES];
+  if (i >= n) return;
+  counts[i] = (gr_uint)gr_device_planes(colliders, count, ox, oy, oz, query_scale, P, p, radius,
+                                        inv_mass, i, pi, dist, nrm, idx);
+}
+
+__kernel void gr_k_plane_fill(GR_PLANE_ARGS, __global const gr_uint* offsets, __global float* plane,
+                              __global int* which) {
+  const int i = (int)get_global_id(0);
+  const float origin[3] = {ox, oy, oz};
+  float pi[3], dist[GR_MAX_PLANES], nrm[3 * GR_MAX_PLANES];
+  int idx[GR_MAX_PLANES], found, k, a;
+  if (i >= n || offsets[i + 1] == offsets[i]) return;
+  found = gr_device_planes(colliders, count, ox, oy, oz, query_scale, P, p, radius, inv_mass, i, pi,
+                           dist, nrm, idx);
+  for (k = 0; k < found; ++k) {
+    const gr_uint e = offsets[i] + (gr_uint)k;
+    const gr_collider col = colliders[idx[k]];
+    float xs[3], world[3], v[3];
+    gr_plane_surface(pi, nrm + 3 * k, dist[k], origin, xs, world);
+    gr_collider_velocity(&col, world, v);
+    for (a = 0; a < 3; ++a) {
+      plane[9 * e + a] = xs[a];
+      plane[9 * e + 3 + a] = nrm[3 * k + a];
+      plane[9 * e + 6 + a] = v[a];
+    }
+    which[e] = idx[k];
+  }
 }

@@ -129,7 +129,8 @@ void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& s
   grain_arrays(g, size, a);
   // positions: one float past the last grain, as the contact loop's block loads read
   for (int k = 0; k < kArrays; ++k)
-    if (!rows_only || k == kNbrOffsets || k == kNbrIndices)
+    if ((!rows_only || k == kNbrOffsets || k == kNbrIndices) &&
+        !(size.planes_there && (k == kPlaneOffsets || k == kPlane)))
       upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
   const size_t bytes = (3 * size.n + 1) * sizeof(float);
   upload(p, positions, bytes);
@@ -751,7 +752,8 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
     set_buffer(k, kFirstOwn + 3, &m.seq_offsets);
   };
   m.upload(m.id, id, n * sizeof(int));
-  m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
+  if (!size.planes_there)
+    m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
   // each grain's contacts counted, their offsets
   m.seq_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
   cl_kernel counter = m.kernel(m.seq_count, "gr_k_seq_count");

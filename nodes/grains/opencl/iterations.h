@@ -1,12 +1,14 @@
 // The parts of the substep an OpenCL device runs (a grains node with use_opencl): the neighbour
 // rows (find_neighbours()) and what the host reads along them (row_overlaps(), row_reach()),
-// the Jacobi path's pre-stabilization (stabilize()), iterations and friction passes (run()),
-// and contact_solver gauss_seidel's list (build_sequential()) and its solve from its contacts
-// on (solve_sequential(): pre-stabilization, the velocity it takes back, the warm start and the
-// passes; run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
-// (prediction, collider planes, contact history, the contact list where the device does not
-// build it; velocity, final collisions, history, strain) and hands each call its inputs. The
-// kernels call the functions the CPU loops call (kernels/, engine/pair_test.h; grains.cl). Each
+// the collider planes (find_planes()), the Jacobi path's pre-stabilization (stabilize()),
+// iterations and friction passes (run()), and contact_solver gauss_seidel's list
+// (build_sequential()) and its solve from its contacts on (solve_sequential():
+// pre-stabilization, the velocity it takes back, the warm start and the passes;
+// run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
+// (prediction, a mesh collider's planes, contact history, the contact list where the device
+// does not build it; velocity, final collisions, history, strain) and hands each call its
+// inputs. The kernels call the functions the CPU loops call (kernels/, engine/pair_test.h,
+// engine/collider_shape.h; grains.cl). Each
 // per-grain work-item writes only its own grain and sums in row order; each Gauss-Seidel
 // work-group sweeps one block of contacts wave by wave, its work-items sharing a wave, no two
 // blocks at once and no two contacts of a wave writing one grain; integer atomics only count: a
@@ -17,7 +19,9 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
+#include "engine/collider_shape.h"
 #include "engine/neighbors.h"
 #include "nodes/grains/kernels/iterate.h"
 #include "nodes/grains/kernels/sequential.h"
@@ -32,6 +36,9 @@ struct IterationSizes {
   size_t plane_entries = 0;
   size_t prims = 0;
   size_t row_length = 0;  // floats of one grain's overlap row (whole blocks of GR_LANES)
+  // the device holds the substep's collider planes as its find_planes() left them: the plane
+  // rows, entries and colliders do not go up again
+  bool planes_there = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
@@ -192,6 +199,23 @@ class Iterations {
   // the contacts the device's last solve left (s's blocks, parts as they went up or were built)
   // into s.contacts
   void fetch_contacts(const SequentialContacts& s);
+
+  // The collider planes (kernels/planes.h) of n grains among `count` analytic colliders (no
+  // mesh), found on the device: GrainsSolver::find_planes' rows, bit for bit. P and p (n x 3,
+  // the substep's coordinates, world = those + origin), radius and inv_mass (n); p_there: p is
+  // the positions the device's last find_neighbours() took, radius_there: radius is its radii
+  // (neither then goes up). Out: each grain's first entry and the end (n + 1), the entries (9
+  // floats each: surface point, normal, the collider's velocity there) and their colliders.
+  // entries_stay: *plane is sized but not written; the entries stay on the device until
+  // fetch_planes() brings them. The device keeps all three for the calls that follow
+  // (IterationSizes::planes_there).
+  void find_planes(const gr_collider* colliders, size_t count, const float origin[3],
+                   float query_scale, const float* P, const float* p, const float* radius,
+                   const float* inv_mass, size_t n, bool p_there, bool radius_there,
+                   bool entries_stay, std::vector<uint32_t>* offsets, std::vector<float>* plane,
+                   std::vector<int32_t>* which);
+  // the entries the last find_planes() found into *plane (sized for them)
+  void fetch_planes(std::vector<float>* plane);
 
   const std::string& device_name() const;
   // whether a block's contacts are shared among several work-items (GRAINS_OPENCL_SWEEP_ITEMS,

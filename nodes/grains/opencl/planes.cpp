@@ -1,0 +1,79 @@
+// The collider planes on an OpenCL device (Iterations::find_planes; the kernels: grains.cl and
+// kernels/planes.h). A work-item a grain counts its planes, a scan turns the counts into rows,
+// and a second pass fills them; the rows, entries and colliders come back.
+#include <limits>
+#include <stdexcept>
+#include <vector>
+
+#include "engine/buffer.h"
+#include "nodes/grains/opencl/device_state.h"
+
+namespace grains::opencl {
+namespace {
+
+template <class T>
+void arg(cl_kernel k, cl_uint index, const T& value) {
+  check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
+}
+void arg(cl_kernel k, cl_uint index, const Buffer& b) {
+  arg(k, index, b.mem);
+}
+
+}  // namespace
+
+void Iterations::find_planes(const gr_collider* colliders, size_t count, const float origin[3],
+                             float query_scale, const float* P, const float* p, const float* radius,
+                             const float* inv_mass, size_t n, bool p_there, bool radius_there,
+                             bool entries_stay, std::vector<uint32_t>* offsets,
+                             std::vector<float>* plane, std::vector<int32_t>* which) {
+  Impl& m = *impl_;
+  const size_t f = sizeof(float), u = sizeof(gr_uint);
+  if (n >= size_t(std::numeric_limits<int>::max()) / 9 ||
+      count >= size_t(std::numeric_limits<int>::max()))
+    throw std::runtime_error("use_opencl: too many grains or colliders for the device's planes");
+  offsets->resize(n + 1);
+  m.open_neighbours();  // the scan
+  cl_kernel kc = m.kernel(m.plane_count, "gr_k_plane_count");
+  cl_kernel kf = m.kernel(m.plane_fill, "gr_k_plane_fill");
+  m.upload(m.plane_colliders, colliders, count * sizeof(gr_collider));
+  m.upload(m.plane_P, P, 3 * n * f);
+  // the search's copies when they are these (its own must stay as it took them: row_reach)
+  Buffer& pb = p_there ? m.nb_P : m.plane_p;
+  Buffer& rb = radius_there ? m.nb_radius : m.plane_radius;
+  if (!p_there) m.upload(pb, p, 3 * n * f);
+  if (!radius_there) m.upload(rb, radius, n * f);
+  m.upload(m.plane_inv_mass, inv_mass, n * f);
+  Buffer& rows = m.arrays[kPlaneOffsets];
+  rows.reserve(m.ctx, (n + 1) * u, m.largest);
+  const int items = static_cast<int>(n), colliders_n = static_cast<int>(count);
+  for (cl_kernel k : {kc, kf}) {
+    arg(k, 0, m.plane_colliders), arg(k, 1, colliders_n);
+    arg(k, 2, origin[0]), arg(k, 3, origin[1]), arg(k, 4, origin[2]), arg(k, 5, query_scale);
+    arg(k, 6, m.plane_P), arg(k, 7, pb), arg(k, 8, rb), arg(k, 9, m.plane_inv_mass);
+    arg(k, 10, items);
+  }
+  arg(kc, 11, rows);
+  m.launch(kc, n);
+  m.scan(rows, n);
+  m.download(rows, offsets->data(), (n + 1) * u);
+  const size_t entries = (*offsets)[n];
+  m.plane_entries = entries;
+  // the fall's wide ranges (|p - P|) can make many more rows than a resting pile keeps
+  resize_for_rewrite(*plane, 9 * entries);
+  resize_for_rewrite(*which, entries);
+  if (entries == 0) return;
+  m.arrays[kPlane].reserve(m.ctx, 9 * entries * f, m.largest);
+  m.plane_collider.reserve(m.ctx, entries * sizeof(int), m.largest);
+  arg(kf, 11, rows), arg(kf, 12, m.arrays[kPlane]), arg(kf, 13, m.plane_collider);
+  m.launch(kf, n);
+  if (!entries_stay) m.download(m.arrays[kPlane], plane->data(), 9 * entries * f);
+  m.download(m.plane_collider, which->data(), entries * sizeof(int));
+}
+
+void Iterations::fetch_planes(std::vector<float>* plane) {
+  Impl& m = *impl_;
+  resize_for_rewrite(*plane, 9 * m.plane_entries);
+  m.download(m.arrays[kPlane], plane->data(), 9 * m.plane_entries * sizeof(float));
+}
+
+}  // namespace grains::opencl

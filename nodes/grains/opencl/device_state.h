@@ -221,6 +221,9 @@ struct Iterations::Impl {
   // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
   // once past their count
   void launch(cl_kernel k, size_t items);
+  // n grains' positions (3 n floats) from `from` into `to`, and a zero past them, as an upload
+  // of positions has (one float past the last grain, which the contact loop's block loads read)
+  void copy_positions(Buffer& to, const Buffer& from, size_t n);
   // s's blocks' waves and colours alone
   void upload_blocks(const SequentialContacts& s);
   // the contacts `seq` holds when it is one part (held_whole): how many

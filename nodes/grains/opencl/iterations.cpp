@@ -462,14 +462,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   // the rows, which clumping reads from these
   const bool p_there = w.p_there && m.rows_grains == n;
   m.upload_grains(g, size, p_there ? nullptr : p, inputs, s.built);
-  if (p_there) {  // one float past the last grain, as an upload of p has
-    const float zero = 0.0f;
-    m.p.reserve(m.ctx, (3 * n + 1) * f, m.largest);
-    check(clEnqueueCopyBuffer(m.queue, m.nb_P.mem, m.p.mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
-          "clEnqueueCopyBuffer");
-    check(clEnqueueFillBuffer(m.queue, m.p.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
-          "clEnqueueFillBuffer");
-  }
+  if (p_there) m.copy_positions(m.p, m.nb_P, n);
   const bool contacts = s.count > 0;
   // whether the contacts carry loads (the warm start runs): the host's flags, or with a
   // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded
@@ -492,15 +485,9 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   // pre-stabilization: x, p, carried, carried_flag, seq, block_wave, blocks, first, count, base,
   // most, wave_start, part
   if (w.x) {
-    // the start as it went up, and no carried move yet: made here, not sent (one float past
-    // the last grain, as the host's copy had)
+    // the start as it went up, and no carried move yet: made here, not sent
+    m.copy_positions(m.stable, m.arrays[kP], n);
     const float zero = 0.0f;
-    m.stable.reserve(m.ctx, (3 * n + 1) * f, m.largest);
-    check(clEnqueueCopyBuffer(m.queue, m.arrays[kP].mem, m.stable.mem, 0, 0, 3 * n * f, 0, nullptr,
-                              nullptr),
-          "clEnqueueCopyBuffer");
-    check(clEnqueueFillBuffer(m.queue, m.stable.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
-          "clEnqueueFillBuffer");
     if (w.take_back) {
       m.carried.reserve(m.ctx, 3 * n * f, m.largest);
       check(
@@ -708,6 +695,16 @@ void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour
   wave_start->resize(count + 1);
   m.download(m.wave_start, wave_start->data(), count * u);
   (*wave_start)[count] = static_cast<gr_uint>(total);
+}
+
+void Iterations::Impl::copy_positions(Buffer& to, const Buffer& from, size_t n) {
+  const size_t f = sizeof(float);
+  const float zero = 0.0f;
+  to.reserve(ctx, (3 * n + 1) * f, largest);
+  check(clEnqueueCopyBuffer(queue, from.mem, to.mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  check(clEnqueueFillBuffer(queue, to.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
+        "clEnqueueFillBuffer");
 }
 
 void Iterations::Impl::launch(cl_kernel k, size_t items) {

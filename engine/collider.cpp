@@ -87,35 +87,28 @@ namespace {
 Vec3 vec(const float* a) {
   return {a[0], a[1], a[2]};
 }
+
+// v through one of the shared pose functions (engine/collider_shape.h)
+Vec3 through(const Pose& q, const Vec3& v, void (*f)(const gr_pose*, const float*, float*)) {
+  const gr_pose g = to_gr(q);
+  const float in[3] = {v.x, v.y, v.z};
+  float out[3];
+  f(&g, in, out);
+  return vec(out);
+}
 }  // namespace
 
 Vec3 Pose::rotate(const Vec3& d) const {
-  const gr_pose g = to_gr(*this);
-  const float in[3] = {d.x, d.y, d.z};
-  float out[3];
-  gr_pose_rotate(&g, in, out);
-  return vec(out);
+  return through(*this, d, gr_pose_rotate);
 }
 Vec3 Pose::unrotate(const Vec3& d) const {
-  const gr_pose g = to_gr(*this);
-  const float in[3] = {d.x, d.y, d.z};
-  float out[3];
-  gr_pose_unrotate(&g, in, out);
-  return vec(out);
+  return through(*this, d, gr_pose_unrotate);
 }
 Vec3 Pose::apply(const Vec3& local) const {
-  const gr_pose g = to_gr(*this);
-  const float in[3] = {local.x, local.y, local.z};
-  float out[3];
-  gr_pose_apply(&g, in, out);
-  return vec(out);
+  return through(*this, local, gr_pose_apply);
 }
 Vec3 Pose::inverse(const Vec3& world) const {
-  const gr_pose g = to_gr(*this);
-  const float in[3] = {world.x, world.y, world.z};
-  float out[3];
-  gr_pose_inverse(&g, in, out);
-  return vec(out);
+  return through(*this, world, gr_pose_inverse);
 }
 
 float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal, float within) {

@@ -67,6 +67,12 @@ static inline float gr_shape_min(float a, float b) {
   return b < a ? b : a;
 }
 
+/* d / l into n, or the axis `fallback` (0, 1, 2) when l is not positive */
+static inline void gr_shape_unit(const float* d, float l, int fallback, float* n) {
+  int a;
+  for (a = 0; a < 3; ++a) n[a] = l > 0.0f ? d[a] / l : (a == fallback ? 1.0f : 0.0f);
+}
+
 static inline float gr_shape_length(const float* v) {
   GR_SHAPE_EXACT
   return GR_SHAPE_SQRT(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -117,12 +123,7 @@ static inline float gr_shape_distance(const gr_shape* sh, const float* p, float*
       return p[1];
     case GR_SHAPE_SPHERE:
       l = gr_shape_length(p);
-      if (n) {
-        if (l > 0.0f)
-          for (a = 0; a < 3; ++a) n[a] = p[a] / l;
-        else
-          n[0] = 0.0f, n[1] = 1.0f, n[2] = 0.0f;
-      }
+      if (n) gr_shape_unit(p, l, 1, n);
       return l - sh->radius;
     case GR_SHAPE_BOX: {
       float q[3], qo[3], outside, inside;
@@ -155,12 +156,7 @@ static inline float gr_shape_distance(const gr_shape* sh, const float* p, float*
         d[2] = p[2] - 0.0f;
       }
       l = gr_shape_length(d);
-      if (n) {
-        if (l > 0.0f)
-          for (a = 0; a < 3; ++a) n[a] = d[a] / l;
-        else
-          n[0] = 0.0f, n[1] = 1.0f, n[2] = 0.0f;
-      }
+      if (n) gr_shape_unit(d, l, 1, n);
       return l - sh->tube;
     }
     case GR_SHAPE_CAPSULE: {
@@ -170,12 +166,7 @@ static inline float gr_shape_distance(const gr_shape* sh, const float* p, float*
       d[1] = p[1] - cy;
       d[2] = p[2] - 0.0f;
       l = gr_shape_length(d);
-      if (n) {
-        if (l > 0.0f)
-          for (a = 0; a < 3; ++a) n[a] = d[a] / l;
-        else
-          n[0] = 1.0f, n[1] = 0.0f, n[2] = 0.0f;
-      }
+      if (n) gr_shape_unit(d, l, 0, n);
       return l - sh->radius;
     }
     default:

@@ -58,6 +58,15 @@ struct Buffer {
   }
 };
 
+// kernel k's argument `index`: a value, or a buffer's memory object
+template <class T>
+inline void arg(cl_kernel k, cl_uint index, const T& value) {
+  check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
+}
+inline void arg(cl_kernel k, cl_uint index, const Buffer& b) {
+  arg(k, index, b.mem);
+}
+
 // the per-grain arrays of gr_grains, in the kernels' argument order (GR_GRAINS_ARGS)
 enum Array {
   kP,

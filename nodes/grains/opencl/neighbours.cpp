@@ -19,14 +19,6 @@ constexpr int64_t kCellMax = (int64_t(1) << 31) - 2;  // the most cells along an
 constexpr size_t kBoundsItems = 16 * kGroup;          // gr_k_bounds' work-items
 constexpr size_t kScanBlock = 1024;                   // counts a work-item of the prefix sum sums
 
-template <class T>
-void arg(cl_kernel k, cl_uint index, const T& value) {
-  check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
-}
-void arg(cl_kernel k, cl_uint index, const Buffer& b) {
-  arg(k, index, b.mem);
-}
-
 // The grid over the box [lo, hi] of n grains with pair distances below t_max (kernels/grid.h):
 // every axis dense when the box has at most 8 cells a grain, else wrapped on powers of two of at
 // least 4 cells until about 4 cells a grain, the longest axis first.

@@ -9,17 +9,6 @@
 #include "nodes/grains/opencl/device_state.h"
 
 namespace grains::opencl {
-namespace {
-
-template <class T>
-void arg(cl_kernel k, cl_uint index, const T& value) {
-  check(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg");
-}
-void arg(cl_kernel k, cl_uint index, const Buffer& b) {
-  arg(k, index, b.mem);
-}
-
-}  // namespace
 
 void Iterations::find_planes(const gr_collider* colliders, size_t count, const float origin[3],
                              float query_scale, const float* P, const float* p, const float* radius,

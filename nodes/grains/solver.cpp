@@ -562,6 +562,10 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   return *this;
 }
 
+opencl::Traffic GrainsSolver::device_traffic() const {
+  return device_.device ? device_.device->traffic() : opencl::Traffic{};
+}
+
 void GrainsSolver::sync_rows() const {
   if (!device_.rows_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
@@ -589,6 +593,9 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   p_on_device_ = planes_on_device_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
+  // the device's calls of this substep may share the arrays bind_inputs makes, which hold their
+  // values until the next
+  if (device_.device) device_.device->begin_substep();
   if (d.n == 0) return;
   if (!(collider_count > 0 && colliders)) collider_count = 0;
   gr_grains g;
@@ -969,6 +976,8 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
   find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
               c.threads, c.s.use_opencl ? &device : nullptr);
+  // the device's planes took the predicted positions (the solve copies them there)
+  if (first && planes_on_device_) p_on_device_ = true;
   g.plane_offsets = plane_offsets_.data();
   g.plane = plane_.data();
   if (friction) {

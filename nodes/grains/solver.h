@@ -24,6 +24,7 @@ namespace opencl {
 class Iterations;
 struct IterationSizes;
 struct SequentialContacts;
+struct Traffic;
 }
 
 enum class MassShock { Off = 0, Global = 1, Local = 2 };
@@ -178,6 +179,9 @@ class GrainsSolver {
   }
   // use_opencl: the collider plane searches the device ran (planes.cpp)
   size_t planes_found_on_device() const { return planes_device_; }
+  // use_opencl: what has crossed between the host and the device since the solver opened it
+  // (opencl::Iterations::traffic; zero before)
+  opencl::Traffic device_traffic() const;
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
   // until the next substep
@@ -278,8 +282,8 @@ class GrainsSolver {
   // use_opencl: neighbors_ holds the rows the device's last search gave, unchanged (kept across
   // substeps with them), which the device's contact list build then reads where they are
   bool rows_on_device_ = false;
-  // this substep's predicted positions p_ went to the device with its search, unchanged since
-  // (the solve then copies them there rather than sending them again)
+  // this substep's predicted positions p_ went to the device with its search of rows or
+  // planes, unchanged since (the solve then copies them there rather than sending them again)
   bool p_on_device_ = false;
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;

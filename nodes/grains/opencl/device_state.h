@@ -159,16 +159,16 @@ struct Iterations::Impl {
       nb_keys, nb_indices, nb_sums;
   bool rows_found = false;  // nb_offsets and nb_indices hold the rows the last search gave
   size_t rows_grains = 0;   // the grains of those rows
-  // what the host reads along the rows (kernels/row_stats.h): the kernels, the positions and
-  // radii they read, each run's results
+  // what the host reads along the rows (kernels/row_stats.h): the kernels, the positions they
+  // read (the radii: arrays[kRadius] or nb_radius), each run's results
   cl_kernel row_overlaps = nullptr, row_reach = nullptr;
-  Buffer stats_P, stats_radius, stats_part;
-  // the collider planes (planes.cpp): the kernels, the colliders, the start and predicted
-  // positions, radii and inverse masses they read (the predicted positions and radii the
-  // search's nb_P and nb_radius when it took these); the rows and entries go to
-  // arrays[kPlaneOffsets], arrays[kPlane] and plane_collider
+  Buffer stats_P, stats_part;
+  // the collider planes (planes.cpp): the kernels, the colliders and the predicted positions
+  // they read (the search's nb_P when it took these; the start positions, radii and inverse
+  // masses are arrays[kP], [kRadius] and [kInvMass], or the search's nb_radius); the rows and
+  // entries go to arrays[kPlaneOffsets], arrays[kPlane] and plane_collider
   cl_kernel plane_count = nullptr, plane_fill = nullptr;
-  Buffer plane_colliders, plane_P, plane_p, plane_radius, plane_inv_mass;
+  Buffer plane_colliders, plane_p;
   size_t plane_entries = 0;  // the entries the last find_planes found
 
   ~Impl() {
@@ -185,8 +185,7 @@ struct Iterations::Impl {
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
-                      &stats_radius, &stats_part, &plane_colliders, &plane_P, &plane_p,
-                      &plane_radius, &plane_inv_mass})
+                      &stats_part, &plane_colliders, &plane_p})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -201,18 +200,68 @@ struct Iterations::Impl {
     if (ctx) clReleaseContext(ctx);
   }
 
+  // what has crossed since the device was opened (Iterations::traffic): every transfer goes
+  // through upload(), send() or download()
+  Traffic traffic;
+  // The arrays sent this substep that hold the same values through it (a grain's radius, mass,
+  // start position, attributes, pins; Iterations::begin_substep forgets them): each buffer's
+  // host array and bytes. upload_once() sends one only when its buffer holds another; any other
+  // transfer into a buffer forgets what it held.
+  struct Once {
+    const Buffer* buffer;
+    cl_mem mem;  // the buffer's memory when it took them (a larger one holds nothing of them)
+    const void* host;
+    size_t bytes;
+  };
+  std::vector<Once> once;
+  void forget(const Buffer& b) {
+    auto of_b = [&](const Once& h) { return h.buffer == &b; };
+    once.erase(std::remove_if(once.begin(), once.end(), of_b), once.end());
+  }
+  // upload(), skipped when b holds these bytes of this host array from earlier in the substep
+  void upload_once(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
+    if (!host) return;
+    for (const Once& h : once)
+      if (h.buffer == &b && h.mem == b.mem && h.host == host && h.bytes == bytes &&
+          b.capacity >= std::max(bytes, device_bytes))
+        return;
+    upload(b, host, bytes, device_bytes);
+    once.push_back({&b, b.mem, host, bytes});
+  }
+  // upload_once()'s record that b holds the host array `host` (bytes of it) copied there on the
+  // device from another buffer
+  void copied_once(const Buffer& b, const void* host, size_t bytes) {
+    forget(b);
+    once.push_back({&b, b.mem, host, bytes});
+  }
+  // the substep's predicted positions where the last search of rows or planes took them (nb_P
+  // or plane_p), for p_taken_n grains
+  const Buffer* p_taken = nullptr;
+  size_t p_taken_n = 0;
+
   // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
   void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
     if (!host) return;
+    forget(b);
     b.reserve(ctx, std::max(bytes, device_bytes), largest);
-    if (bytes > 0)
-      check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
-            "clEnqueueWriteBuffer");
+    send(b, host, bytes);
   }
-  void download(Buffer& b, void* host, size_t bytes) {
+  // copies `bytes` of host memory to the start of b, which holds them already
+  void send(Buffer& b, const void* host, size_t bytes) {
+    if (bytes == 0) return;
+    forget(b);
+    check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
+          "clEnqueueWriteBuffer");
+    traffic.sent += bytes;
+    ++traffic.uploads;
+  }
+  // `bytes` of b from byte `offset` on into host memory (waits for them)
+  void download(Buffer& b, void* host, size_t bytes, size_t offset = 0) {
     if (!host || bytes == 0) return;
-    check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, 0, bytes, host, 0, nullptr, nullptr),
+    check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, offset, bytes, host, 0, nullptr, nullptr),
           "clEnqueueReadBuffer");
+    traffic.received += bytes;
+    ++traffic.downloads;
   }
 
   // g's arrays (grain_arrays, into a) to `arrays` and the positions p to `p`, once a call;

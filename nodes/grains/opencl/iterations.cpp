@@ -112,6 +112,15 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
 
 Iterations::~Iterations() = default;
 
+void Iterations::begin_substep() {
+  impl_->once.clear();
+  impl_->p_taken = nullptr;
+}
+
+Traffic Iterations::traffic() const {
+  return impl_->traffic;
+}
+
 const std::string& Iterations::device_name() const {
   return impl_->name;
 }
@@ -128,10 +137,19 @@ void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& s
                                      const float* positions, HostArray* a, bool rows_only) {
   grain_arrays(g, size, a);
   // positions: one float past the last grain, as the contact loop's block loads read
-  for (int k = 0; k < kArrays; ++k)
-    if ((!rows_only || k == kNbrOffsets || k == kNbrIndices) &&
-        !(size.planes_there && (k == kPlaneOffsets || k == kPlane)))
-      upload(arrays[k], a[k].host, a[k].bytes, k == kP ? a[k].bytes + sizeof(float) : 0);
+  for (int k = 0; k < kArrays; ++k) {
+    if (!((!rows_only || k == kNbrOffsets || k == kNbrIndices) &&
+          !(size.planes_there && (k == kPlaneOffsets || k == kPlane))))
+      continue;
+    const size_t device_bytes = k == kP ? a[k].bytes + sizeof(float) : 0;
+    // the rows and the planes (and their slips) may be found again within the substep
+    const bool same_all_substep = k != kNbrOffsets && k != kNbrIndices && k != kPairSlip &&
+                                  k != kPlaneOffsets && k != kPlane && k != kPlaneSlip;
+    if (same_all_substep)
+      upload_once(arrays[k], a[k].host, a[k].bytes, device_bytes);
+    else
+      upload(arrays[k], a[k].host, a[k].bytes, device_bytes);
+  }
   const size_t bytes = (3 * size.n + 1) * sizeof(float);
   upload(p, positions, bytes);
   next.reserve(ctx, bytes, largest);
@@ -150,9 +168,9 @@ void Iterations::Impl::set_grains(cl_kernel k, const gr_params& prm, const gr_gr
 
 void Iterations::Impl::set_pins(const gr_grains& g, const gr_params& prm, size_t n) {
   const size_t f = sizeof(float);
-  upload(target, g.targetP, 3 * n * f);
-  upload(target_weight, g.targetweight, n * f);
-  upload(target_stiffness, g.targetstiffness, n * f);
+  upload_once(target, g.targetP, 3 * n * f);
+  upload_once(target_weight, g.targetweight, n * f);
+  upload_once(target_stiffness, g.targetstiffness, n * f);
   const int count = static_cast<int>(n);
   check(clSetKernelArg(pin, 0, sizeof(gr_params), &prm), "clSetKernelArg(prm)");
   set_buffer(pin, 1, &target);
@@ -460,9 +478,9 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   HostArray inputs[kArrays];
   // a list built on the device came with the same grains' arrays (build_sequential), all but
   // the rows, which clumping reads from these
-  const bool p_there = w.p_there && m.rows_grains == n;
+  const bool p_there = w.p_there && m.p_taken && m.p_taken_n == n;
   m.upload_grains(g, size, p_there ? nullptr : p, inputs, s.built);
-  if (p_there) m.copy_positions(m.p, m.nb_P, n);
+  if (p_there) m.copy_positions(m.p, *m.p_taken, n);
   const bool contacts = s.count > 0;
   // whether the contacts carry loads (the warm start runs): the host's flags, or with a
   // resident list those gr_k_keep writes: seq, base, count, warm, scale, loaded
@@ -606,8 +624,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       any = 0;
       sum_repeat();
       per_grain(cold);
-      check(clEnqueueWriteBuffer(m.queue, m.cut.mem, CL_FALSE, 0, sizeof any, &any, 0, nullptr, nullptr),
-            "clEnqueueWriteBuffer");
+      m.send(m.cut, &any, sizeof any);
       m.each_part(cut, 0, s, Impl::PartArgs::kNoArg, 4);
       m.download(m.cut, &any, sizeof any);
     }
@@ -629,9 +646,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   if (s.loaded) {
     gr_uint count_loaded = 0;
     m.seq_loaded_count.reserve(m.ctx, sizeof(gr_uint), m.largest);
-    check(clEnqueueWriteBuffer(m.queue, m.seq_loaded_count.mem, CL_FALSE, 0, sizeof count_loaded,
-                               &count_loaded, 0, nullptr, nullptr),
-          "clEnqueueWriteBuffer");
+    m.send(m.seq_loaded_count, &count_loaded, sizeof count_loaded);
     cl_kernel k = m.kernel(m.seq_loaded, "gr_k_seq_loaded");
     set_buffer(k, 3, &m.seq_loaded_count);
     m.each_part(k, 0, s);
@@ -748,7 +763,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
     check(clSetKernelArg(k, kFirstOwn + 2, sizeof(int), &count), "clSetKernelArg");
     set_buffer(k, kFirstOwn + 3, &m.seq_offsets);
   };
-  m.upload(m.id, id, n * sizeof(int));
+  m.upload_once(m.id, id, n * sizeof(int));
   if (!size.planes_there)
     m.upload(m.plane_collider, plane_collider, size.plane_entries * sizeof(int));
   // each grain's contacts counted, their offsets
@@ -758,9 +773,7 @@ bool Iterations::build_sequential(const gr_grains& g, const gr_params& prm,
   m.launch(counter, n);
   m.scan(m.seq_offsets, n);
   gr_uint total = 0;
-  check(clEnqueueReadBuffer(m.queue, m.seq_offsets.mem, CL_TRUE, n * u, u, &total, 0, nullptr,
-                            nullptr),
-        "clEnqueueReadBuffer");
+  m.download(m.seq_offsets, &total, u, n * u);
   if (size_t(total) * per > m.largest) return false;
   // the last list moves aside for the lookup; the new one is written where the solve reads it
   if (m.seq.empty()) m.seq.resize(1);

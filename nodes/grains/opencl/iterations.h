@@ -96,8 +96,8 @@ struct SequentialSolve {
   // a byte a contact, 1 when it carries a load (waiting in its accumulators, scaled to this
   // substep): the warm start runs when set (kernels/warm.h)
   const uint8_t* loaded = nullptr;
-  // p_there: p (as it comes in) is the positions the device's last find_neighbours() took, which
-  // are copied there rather than sent again
+  // p_there: p (as it comes in) is the positions the substep's last find_neighbours() or
+  // find_planes() took, which are copied there rather than sent again
   bool p_there = false;
   // take_back: what the loaded contacts' pre-stabilization moved each grain is summed on the
   // device (from zero, there), and the velocity it made taken back from v (3 n floats, in and
@@ -105,6 +105,13 @@ struct SequentialSolve {
   bool take_back = false;
   float* v = nullptr;
   float inv_last = 0.0f;
+};
+
+// What crosses between the host and the device: bytes each way, and the transfers that carried
+// them (a copy or a fill on the device is neither)
+struct Traffic {
+  uint64_t sent = 0, received = 0;
+  uint64_t uploads = 0, downloads = 0;
 };
 
 class Iterations {
@@ -144,8 +151,8 @@ class Iterations {
   void fetch_rows(NeighborList& out);
   // What the host reads along those rows (kernels/row_stats.h), computed where they are in runs
   // of grains and combined in run order. row_overlaps: the overlap statistics of the positions
-  // P (n x 3, m, uploaded) with the radii `radius` (n, uploaded; null: the radii the search
-  // took). row_reach: the smallest reach of the rows holding `full` candidates or more, of the
+  // P (n x 3, m, uploaded) with the radii `radius` (n, the grains' radii, uploaded once a
+  // substep as gr_grains' are, begin_substep; null: the radii the search took). row_reach: the smallest reach of the rows holding `full` candidates or more, of the
   // positions the search took and the radii `radius` (as above), r_max the largest radius;
   // +infinity when none is full. Both false when the device holds no rows of n grains.
   struct RowOverlaps {
@@ -216,6 +223,15 @@ class Iterations {
                    std::vector<int32_t>* which);
   // the entries the last find_planes() found into *plane (sized for them)
   void fetch_planes(std::vector<float>* plane);
+
+  // A new substep: the calls until the next one may take a grain array (gr_grains' per-grain
+  // arrays but the rows and planes, and the pins') sent by an earlier one from the same host
+  // array and not send it again (the caller keeps each such array's values through the
+  // substep), and the predicted positions the substep's search of rows or planes took
+  // (SequentialSolve::p_there).
+  void begin_substep();
+  // what has crossed between the host and the device since it was opened
+  Traffic traffic() const;
 
   const std::string& device_name() const;
   // whether a block's contacts are shared among several work-items (GRAINS_OPENCL_SWEEP_ITEMS,

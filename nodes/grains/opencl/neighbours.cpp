@@ -88,8 +88,7 @@ void Iterations::Impl::scan(Buffer& x, size_t n) {
   const size_t blocks = (n + kScanBlock - 1) / kScanBlock;
   if (blocks == 0) {
     const gr_uint zero = 0;
-    check(clEnqueueWriteBuffer(queue, x.mem, CL_FALSE, 0, sizeof zero, &zero, 0, nullptr, nullptr),
-          "clEnqueueWriteBuffer");
+    send(x, &zero, sizeof zero);
     return;
   }
   nb_sums.reserve(ctx, (blocks + 1) * sizeof(gr_uint), largest);
@@ -125,6 +124,8 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   const int count = static_cast<int>(n);
   m.upload(m.nb_P, P, 3 * n * f);
   m.upload(m.nb_radius, radius, n * f);
+  m.p_taken = &m.nb_P;
+  m.p_taken_n = n;
 
   // the finite positions' box and the largest radius
   m.nb_part.reserve(m.ctx, 7 * kBoundsItems * f, m.largest);
@@ -218,11 +219,12 @@ bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, Row
   if (n == 0) return true;
   const size_t f = sizeof(float), runs = kBoundsItems;
   m.upload(m.stats_P, P, 3 * n * f);
-  m.upload(m.stats_radius, radius, n * f);
+  Buffer& rb = radius ? m.arrays[kRadius] : m.nb_radius;
+  m.upload_once(rb, radius, n * f);
   m.stats_part.reserve(m.ctx, 3 * runs * sizeof(double), m.largest);
   const int count = static_cast<int>(n), items = static_cast<int>(runs);
   cl_kernel k = m.row_overlaps;
-  arg(k, 0, m.stats_P), arg(k, 1, radius ? m.stats_radius : m.nb_radius);
+  arg(k, 0, m.stats_P), arg(k, 1, rb);
   arg(k, 2, m.nb_offsets), arg(k, 3, m.nb_indices), arg(k, 4, count), arg(k, 5, items);
   arg(k, 6, m.stats_part);
   m.launch(k, runs);
@@ -242,11 +244,12 @@ bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_
   *reach = std::numeric_limits<float>::infinity();
   if (n == 0 || full == 0) return true;
   const size_t runs = kBoundsItems;
-  m.upload(m.stats_radius, radius, n * sizeof(float));
+  Buffer& rb = radius ? m.arrays[kRadius] : m.nb_radius;
+  m.upload_once(rb, radius, n * sizeof(float));
   m.stats_part.reserve(m.ctx, runs * sizeof(float), m.largest);
   const int count = static_cast<int>(n), items = static_cast<int>(runs);
   cl_kernel k = m.row_reach;
-  arg(k, 0, m.nb_P), arg(k, 1, radius ? m.stats_radius : m.nb_radius), arg(k, 2, m.nb_offsets);
+  arg(k, 0, m.nb_P), arg(k, 1, rb), arg(k, 2, m.nb_offsets);
   arg(k, 3, m.nb_indices);
   arg(k, 4, count), arg(k, 5, items), arg(k, 6, full), arg(k, 7, r_max), arg(k, 8, m.stats_part);
   m.launch(k, runs);

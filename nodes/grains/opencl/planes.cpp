@@ -25,20 +25,34 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   cl_kernel kc = m.kernel(m.plane_count, "gr_k_plane_count");
   cl_kernel kf = m.kernel(m.plane_fill, "gr_k_plane_fill");
   m.upload(m.plane_colliders, colliders, count * sizeof(gr_collider));
-  m.upload(m.plane_P, P, 3 * n * f);
-  // the search's copies when they are these (its own must stay as it took them: row_reach)
+  // the start positions, radii and inverse masses where the solve reads them (Impl::upload_once:
+  // sent once a substep), the predicted positions and radii the search's copies when it took these
+  // (its own must stay as it took them: row_reach)
+  Buffer& Pb = m.arrays[kP];
+  m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
   Buffer& pb = p_there ? m.nb_P : m.plane_p;
-  Buffer& rb = radius_there ? m.nb_radius : m.plane_radius;
+  Buffer& rb = radius_there ? m.nb_radius : m.arrays[kRadius];
   if (!p_there) m.upload(pb, p, 3 * n * f);
-  if (!radius_there) m.upload(rb, radius, n * f);
-  m.upload(m.plane_inv_mass, inv_mass, n * f);
+  if (!radius_there) {
+    m.upload_once(rb, radius, n * f);
+  } else {
+    Buffer& to = m.arrays[kRadius];
+    to.reserve(m.ctx, n * f, m.largest);
+    check(clEnqueueCopyBuffer(m.queue, rb.mem, to.mem, 0, 0, n * f, 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+    m.copied_once(to, radius, n * f);
+  }
+  m.p_taken = &pb;
+  m.p_taken_n = n;
+  Buffer& wb = m.arrays[kInvMass];
+  m.upload_once(wb, inv_mass, n * f);
   Buffer& rows = m.arrays[kPlaneOffsets];
   rows.reserve(m.ctx, (n + 1) * u, m.largest);
   const int items = static_cast<int>(n), colliders_n = static_cast<int>(count);
   for (cl_kernel k : {kc, kf}) {
     arg(k, 0, m.plane_colliders), arg(k, 1, colliders_n);
     arg(k, 2, origin[0]), arg(k, 3, origin[1]), arg(k, 4, origin[2]), arg(k, 5, query_scale);
-    arg(k, 6, m.plane_P), arg(k, 7, pb), arg(k, 8, rb), arg(k, 9, m.plane_inv_mass);
+    arg(k, 6, Pb), arg(k, 7, pb), arg(k, 8, rb), arg(k, 9, wb);
     arg(k, 10, items);
   }
   arg(kc, 11, rows);

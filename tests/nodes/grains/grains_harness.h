@@ -212,14 +212,14 @@ struct Scene {
   }
 };
 
-// The contact-list tests' scene (gauss_seidel keeps its list while the neighbour rows are kept):
-// 512 grains of radius 0.04 m in layers half a radius apart, a little jittered sideways, fall onto
-// the ground at 8 x 10 for 96 substeps (the fall moves the rows, the rest keeps them), the
-// solver's state written and read back after every substep when `round_trip` (a checkpoint,
-// which drops the list). Returns the scene; *kept is the substeps that kept the list.
-// max_neighbors > 0 cuts the rows at that many candidates (the Verlet skin is then the cut
-// rows' reach).
-inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int max_neighbors = 0) {
+// The contact-list tests' scene (gauss_seidel keeps its list while the neighbour rows are kept),
+// layered_block before its fall, layered_drop after: 512 grains of radius 0.04 m in layers half a
+// radius apart, a little jittered sideways, fall onto the ground at 8 x 10 for 96 substeps (the
+// fall moves the rows, the rest keeps them), the solver's state written and read back after every
+// substep when `round_trip` (a checkpoint, which drops the list). Returns the scene; *kept is the
+// substeps that kept the list. max_neighbors > 0 cuts the rows at that many candidates (the Verlet
+// skin is then the cut rows' reach).
+inline Scene layered_block(bool use_opencl, int max_neighbors = 0) {
   Scene sc;
   sc.s = settings(24, 8, 10);
   if (max_neighbors > 0) sc.s.max_neighbors = max_neighbors;
@@ -233,6 +233,10 @@ inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int ma
         sc.add({0.081f * a + 0.001f * seq.next(), 0.045f + 0.1f * b,
                 0.081f * c + 0.001f * seq.next()},
                0.04f);
+  return sc;
+}
+inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int max_neighbors = 0) {
+  Scene sc = layered_block(use_opencl, max_neighbors);
   for (int k = 0; k < 96; ++k) {
     sc.substep();
     if (round_trip) {

@@ -15,10 +15,13 @@
 // accumulated over the frame (engine ColliderFeedback -> DIR/colliders.csv).
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <unordered_map>
 
 #include "engine/node.h"
+#include "nodes/grains/kernels/row_stats.h"
 #include "nodes/grains/opencl/device.h"
+#include "nodes/grains/sleep_rows.h"
 #include "nodes/grains/solver.h"
 #include "nodes/register.h"
 
@@ -240,29 +243,41 @@ class GrainsNode : public Node {
     auto wake_limit = [&](size_t k) {
       return wake * r_[k] + length(load3(F, idx_[k])) / awake_mass_[k] * dt;
     };
-    const NeighborList* rows = solver_.candidates();
-    // the grains within reach x (r_k + r_j) of grain k
-    auto touching = [&](size_t k, float reach) {
-      int32_t count = 0;
-      if (!rows) return count;
-      const Vec3 pk = load3(P_.data(), k);
-      for (uint32_t e = rows->offsets[k]; e < rows->offsets[k + 1]; ++e) {
-        const uint32_t j = rows->indices[e];
-        if (length(load3(P_.data(), j) - pk) < reach * (r_[k] + r_[j])) ++count;
-      }
-      return count;
-    };
     woken_.assign(n, 0);
+    bool moved = false;  // a sleeper put back where it began (its substep moved it a little)
     for (size_t k = 0; k < n; ++k) {
       if (!asleep_[k]) continue;
       const Vec3 start = load3(P_start_.data(), k);
       if (length(load3(P_.data(), k) - start) > wake_limit(k) * dt) {
         woken_[k] = 1;
       } else {
+        moved = moved || std::memcmp(&P_[3 * k], &P_start_[3 * k], 3 * sizeof(float)) != 0;
         store3(P_.data(), k, start);
         store3(v_.data(), k, Vec3{});
       }
     }
+    // the awake grains moving fast enough to wake a sleeper they touch
+    fast_.assign(n, 0);
+    for (size_t j = 0; j < n; ++j) {
+      if (asleep_[j] || !(awake_mass_[j] > 0)) continue;
+      const float speed = std::max(length(load3(v_start_.data(), j)), length(load3(v_.data(), j)));
+      fast_[j] = speed > wake_limit(j);
+    }
+    // Each grain's reads along its neighbour row (kernels/row_stats.h), made where the rows are:
+    // on the device while they stay there (use_opencl), else along the host's (sleep_rows.h)
+    const bool there = solver_.sleep_rows_on_device(P_.data(), moved, fast_.data(), &row_words_);
+    const NeighborList* rows = there ? nullptr : solver_.candidates();
+    // the grains within reach x (r_k + r_j) of grain k, reach GR_SLEEP_NEAR or GR_SLEEP_KEPT
+    auto touching = [&](size_t k, float reach) -> int32_t {
+      if (there)
+        return static_cast<int32_t>((row_words_[k] >> (reach == GR_SLEEP_NEAR ? 0 : 15)) &
+                                    GR_SLEEP_COUNT_MAX);
+      return rows ? static_cast<int32_t>(sleep_row_near(*rows, P_.data(), r_.data(), k, reach)) : 0;
+    };
+    auto fast_near = [&](size_t k) {
+      if (there) return (row_words_[k] & GR_SLEEP_FAST) != 0;
+      return sleep_row_fast_near(*rows, P_.data(), r_.data(), fast_.data(), k, GR_SLEEP_NEAR);
+    };
     // a collider that moved this substep wakes the sleepers it touches, at its start or end
     // pose (a floor that drops away leaves none hanging)
     for (const ColliderState& col : colliders) {
@@ -274,24 +289,13 @@ class GrainsNode : public Node {
         if (col.distance(p, nullptr, 2.0f * reach) < reach) woken_[k] = 1;
       }
     }
-    if (rows) {
+    if (there || rows) {
       for (size_t k = 0; k < n; ++k) {
         if (!asleep_[k] || woken_[k]) continue;
         // a contact it slept on is gone: a grain 1.05 radii-sums away when it fell asleep is
-        // counted until 1.25 (an awake neighbour's jiggle does not wake it)
-        if (touching(k, 1.25f) < touched[idx_[k]]) {
-          woken_[k] = 1;
-          continue;
-        }
-        const Vec3 pk = load3(P_.data(), k);
-        for (uint32_t e = rows->offsets[k]; e < rows->offsets[k + 1] && !woken_[k]; ++e) {
-          const uint32_t j = rows->indices[e];
-          if (asleep_[j] || !(awake_mass_[j] > 0)) continue;
-          const float speed = std::max(length(load3(v_start_.data(), j)), length(load3(v_.data(), j)));
-          if (!(speed > wake_limit(j))) continue;
-          const float reach = 1.05f * (r_[k] + r_[j]);
-          if (length(load3(P_.data(), j) - pk) < reach) woken_[k] = 1;
-        }
+        // counted until 1.25 (an awake neighbour's jiggle does not wake it); or an awake
+        // neighbour within 1.05 moves fast
+        if (touching(k, GR_SLEEP_KEPT) < touched[idx_[k]] || fast_near(k)) woken_[k] = 1;
       }
     }
     for (size_t k = 0; k < n; ++k) {
@@ -307,7 +311,7 @@ class GrainsNode : public Node {
       if (T[i] >= st.sleep_time) {
         store3(v_.data(), k, Vec3{});
         store3(a_slept, i, load3(F, i) / awake_mass_[k]);
-        touched[i] = touching(k, 1.05f);
+        touched[i] = touching(k, GR_SLEEP_NEAR);
       }
     }
   }
@@ -463,7 +467,9 @@ class GrainsNode : public Node {
   std::vector<int32_t> imp_c_;
   std::unordered_map<int32_t, float> strongest_;    // id -> strongest normal impulse this frame
   // sleeping (put_to_sleep, update_sleep): per gathered grain
-  std::vector<uint8_t> asleep_, can_sleep_, woken_;
+  std::vector<uint8_t> asleep_, can_sleep_, woken_, fast_;
+  // each grain's sleeping reads along its row (gr_row_sleep), made on the device
+  std::vector<uint32_t> row_words_;
   std::vector<float> awake_mass_, v_start_, P_start_;
 };
 

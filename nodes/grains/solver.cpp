@@ -562,6 +562,19 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   return *this;
 }
 
+bool GrainsSolver::sleep_rows_on_device(const float* P, bool moved, const uint8_t* fast,
+                                        std::vector<uint32_t>* out) {
+  if (!candidates_on_ || !device_.rows_stale) return false;
+  out->resize(n_);
+  const bool there = !moved && P == written_on_device_;
+  if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data()))
+    return false;
+  for (const uint32_t w : *out)
+    if (w & GR_SLEEP_OVER) return false;
+  ++sleep_rows_device_;
+  return true;
+}
+
 opencl::Traffic GrainsSolver::device_traffic() const {
   return device_.device ? device_.device->traffic() : opencl::Traffic{};
 }
@@ -591,6 +604,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
   p_on_device_ = planes_on_device_ = false;
+  written_on_device_ = nullptr;
   stabilize_passes_ = 0;
   device_.owner = this;
   // the device's calls of this substep may share the arrays bind_inputs makes, which hold their
@@ -1332,6 +1346,7 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
   if (device_.rows_stale &&
       device_.device->row_overlaps(d.P, rows_true_radius_ ? nullptr : radius_, n, &there)) {
     contacts = there.contacts, largest = there.largest, sum = there.sum;
+    written_on_device_ = d.P;
   } else {
     sync_rows();
     gr_row_overlaps(d.P, radius_, neighbors_.offsets.data(), neighbors_.indices.data(), 0,

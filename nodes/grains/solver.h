@@ -179,6 +179,16 @@ class GrainsSolver {
   }
   // use_opencl: the collider plane searches the device ran (planes.cpp)
   size_t planes_found_on_device() const { return planes_device_; }
+  // The grains node's sleeping test's reads along the last substep's neighbour rows
+  // (kernels/row_stats.h, gr_row_sleep), made on the device while the rows are there: each
+  // grain's word into *out at the world positions P (not sent again when they are the positions
+  // the substep wrote and !moved) with the substep's radii and a byte a grain, `fast`. False
+  // where the host holds the rows, or a count does not fit its word: the caller then counts
+  // along candidates() (nodes/grains/sleep_rows.h), which brings them.
+  bool sleep_rows_on_device(const float* P, bool moved, const uint8_t* fast,
+                            std::vector<uint32_t>* out);
+  // the sleeping tests made on the device so far
+  size_t sleep_rows_device() const { return sleep_rows_device_; }
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
@@ -285,6 +295,9 @@ class GrainsSolver {
   // this substep's predicted positions p_ went to the device with its search of rows or
   // planes, unchanged since (the solve then copies them there rather than sending them again)
   bool p_on_device_ = false;
+  // the written positions (d.P) error control's statistics sent to the device this substep
+  mutable const float* written_on_device_ = nullptr;
+  size_t sleep_rows_device_ = 0;  // sleep_rows_device()
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;

@@ -56,4 +56,67 @@ GR_INLINE void gr_row_reach(const GR_GLOBAL float* p, const GR_GLOBAL float* rad
   }
 }
 
+/* The grains node's sleeping test (nodes/grains/grains_node.cpp, update_sleep) reads grain k's
+ * row at the written world positions P: how many neighbours lie within 1.05 and within 1.25
+ * times the summed radii (a sleeper wakes when its contacts of 1.05 are no longer within 1.25),
+ * and whether a `fast` one (an awake grain moving faster than it wakes a neighbour) lies within
+ * 1.05. The host and a device must count alike, bit for bit: the distance is written out
+ * without a multiply and an add fused (the device's FP_CONTRACT off here; the host's
+ * nodes/grains/sleep_rows.cpp is compiled with -ffp-contract=off) and OpenCL's dot(), whose
+ * order a device chooses, is not used. */
+#ifdef GR_OPENCL
+#define GR_ROW_EXACT _Pragma("OPENCL FP_CONTRACT OFF")
+#else
+#define GR_ROW_EXACT
+#endif
+
+/* |P_j - P_k| within reach x (r_k + r_j) */
+GR_INLINE int gr_row_within(const GR_GLOBAL float* P, const GR_GLOBAL float* radius, int k, int j,
+                            float reach) {
+  GR_ROW_EXACT
+  const float x = P[3 * j] - P[3 * k], y = P[3 * j + 1] - P[3 * k + 1],
+              z = P[3 * j + 2] - P[3 * k + 2];
+  return gr_sqrt(x * x + y * y + z * z) < reach * (radius[k] + radius[j]);
+}
+
+/* grain k's neighbours within reach x (r_k + r_j) */
+GR_INLINE gr_uint gr_row_near(const GR_GLOBAL float* P, const GR_GLOBAL float* radius,
+                              const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL gr_uint* indices,
+                              int k, float reach) {
+  gr_uint e, count = 0u;
+  for (e = offsets[k]; e < offsets[k + 1]; ++e)
+    count += (gr_uint)gr_row_within(P, radius, k, (int)indices[e], reach);
+  return count;
+}
+
+/* whether one of grain k's neighbours flagged in `fast` lies within reach x (r_k + r_j) */
+GR_INLINE int gr_row_fast_near(const GR_GLOBAL float* P, const GR_GLOBAL float* radius,
+                               const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL gr_uint* indices,
+                               const GR_GLOBAL unsigned char* fast, int k, float reach) {
+  gr_uint e;
+  for (e = offsets[k]; e < offsets[k + 1]; ++e) {
+    const int j = (int)indices[e];
+    if (fast[j] && gr_row_within(P, radius, k, j, reach)) return 1;
+  }
+  return 0;
+}
+
+/* grain k's sleeping reads in one word: bits 0-14 its neighbours within 1.05, bits 15-29 within
+ * 1.25, bit 30 a fast one within 1.05, bit 31 a count past GR_SLEEP_COUNT_MAX (the host then
+ * counts along the rows itself) */
+#define GR_SLEEP_NEAR 1.05f
+#define GR_SLEEP_KEPT 1.25f
+#define GR_SLEEP_COUNT_MAX 32767u
+#define GR_SLEEP_FAST (1u << 30)
+#define GR_SLEEP_OVER (1u << 31)
+GR_INLINE gr_uint gr_row_sleep(const GR_GLOBAL float* P, const GR_GLOBAL float* radius,
+                               const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL gr_uint* indices,
+                               const GR_GLOBAL unsigned char* fast, int k) {
+  const gr_uint near = gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_NEAR);
+  const gr_uint kept = gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_KEPT);
+  const int woken = gr_row_fast_near(P, radius, offsets, indices, fast, k, GR_SLEEP_NEAR);
+  if (near > GR_SLEEP_COUNT_MAX || kept > GR_SLEEP_COUNT_MAX) return GR_SLEEP_OVER;
+  return near | (kept << 15) | (woken ? GR_SLEEP_FAST : 0u);
+}
+
 #endif /* GRAINS_KERNELS_ROW_STATS_H */

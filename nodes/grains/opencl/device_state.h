@@ -160,9 +160,10 @@ struct Iterations::Impl {
   bool rows_found = false;  // nb_offsets and nb_indices hold the rows the last search gave
   size_t rows_grains = 0;   // the grains of those rows
   // what the host reads along the rows (kernels/row_stats.h): the kernels, the positions they
-  // read (the radii: arrays[kRadius] or nb_radius), each run's results
-  cl_kernel row_overlaps = nullptr, row_reach = nullptr;
-  Buffer stats_P, stats_part;
+  // read (the radii: arrays[kRadius] or nb_radius), each run's results; the sleeping test's
+  // kernel, its fast flags and its words
+  cl_kernel row_overlaps = nullptr, row_reach = nullptr, sleep_rows = nullptr;
+  Buffer stats_P, stats_part, sleep_fast, sleep_out;
   // the collider planes (planes.cpp): the kernels, the colliders and the predicted positions
   // they read (the search's nb_P when it took these; the start positions, radii and inverse
   // masses are arrays[kP], [kRadius] and [kInvMass], or the search's nb_radius); the rows and
@@ -185,7 +186,7 @@ struct Iterations::Impl {
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
-                      &stats_part, &plane_colliders, &plane_p})
+                      &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -193,7 +194,7 @@ struct Iterations::Impl {
                         seq_table, seq_lookup, seq_loaded, seq_waves, seq_wave_starts,
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
-                        row_overlaps, row_reach, plane_count, plane_fill})
+                        row_overlaps, row_reach, sleep_rows, plane_count, plane_fill})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -595,6 +595,16 @@ __kernel void gr_k_row_reach(__global const float* p, __global const float* radi
                (int)((long)n * (w + 1) / runs), full, r_max, &reach);
   part[w] = reach;
 }
+
+/* gr_k_sleep_rows: each grain's sleeping reads along its row (gr_row_sleep), a work-item a
+ * grain */
+__kernel void gr_k_sleep_rows(__global const float* P, __global const float* radius,
+                              __global const gr_uint* offsets, __global const gr_uint* indices,
+                              __global const uchar* fast, int n, __global gr_uint* out) {
+  const int k = (int)get_global_id(0);
+  if (k >= n) return;
+  out[k] = gr_row_sleep(P, radius, offsets, indices, fast, k);
+}
 #endif
 
 /* An exclusive prefix sum of n counts, in place, with the total at [n]: gr_k_scan_blocks sums

@@ -162,6 +162,12 @@ class Iterations {
   };
   bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out);
   bool row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach);
+  // The grains node's sleeping test's reads along those rows: each grain's word (gr_row_sleep)
+  // into out (n) at the world positions P (n x 3, uploaded; null: those the last row_overlaps()
+  // took) with the radii `radius` (n, as row_overlaps takes them) and a byte a grain, `fast`.
+  // False when the device holds no rows of n grains.
+  bool sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n,
+                  uint32_t* out);
 
   // the Jacobi path's pre-stabilization (gr_stabilize) of the start positions x (3 n + 1
   // floats, in and out): pass after pass while go_on(pass, the largest move over a radius)

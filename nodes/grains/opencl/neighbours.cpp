@@ -82,6 +82,7 @@ void Iterations::Impl::open_neighbours() {
   row_fill = make("gr_k_row_fill");
   row_overlaps = make("gr_k_row_overlaps");
   row_reach = make("gr_k_row_reach");
+  sleep_rows = make("gr_k_sleep_rows");
 }
 
 void Iterations::Impl::scan(Buffer& x, size_t n) {
@@ -256,6 +257,25 @@ bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_
   std::vector<float> part(runs);
   m.download(m.stats_part, part.data(), runs * sizeof(float));
   for (float r : part) *reach = std::min(*reach, r);  // the smallest, in any order the same
+  return true;
+}
+
+bool Iterations::sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n,
+                            uint32_t* out) {
+  Impl& m = *impl_;
+  if (!m.rows_found || !m.sleep_rows || n != m.rows_grains) return false;
+  if (n == 0) return true;
+  const size_t f = sizeof(float);
+  if (P) m.upload(m.stats_P, P, 3 * n * f);
+  m.upload_once(m.arrays[kRadius], radius, n * f);
+  m.upload(m.sleep_fast, fast, n);
+  m.sleep_out.reserve(m.ctx, n * sizeof(gr_uint), m.largest);
+  const int count = static_cast<int>(n);
+  cl_kernel k = m.sleep_rows;
+  arg(k, 0, m.stats_P), arg(k, 1, m.arrays[kRadius]), arg(k, 2, m.nb_offsets);
+  arg(k, 3, m.nb_indices), arg(k, 4, m.sleep_fast), arg(k, 5, count), arg(k, 6, m.sleep_out);
+  m.launch(k, n);
+  m.download(m.sleep_out, out, n * sizeof(gr_uint));
   return true;
 }
 

@@ -1,0 +1,22 @@
+// The grains node's sleeping test's reads along neighbour rows on the host
+// (kernels/row_stats.h), counted as a device counts them, bit for bit: this file's source is
+// compiled without a multiply and an add fused (CMakeLists.txt), as the device runs the shared
+// functions. GrainsSolver::sleep_rows_on_device makes them on the device while the rows are
+// there.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+
+#include "engine/neighbors.h"
+
+namespace grains {
+
+// grain k's neighbours in `rows` within reach x (r_k + r_j) at the world positions P (n x 3)
+// with the radii `radius`
+uint32_t sleep_row_near(const NeighborList& rows, const float* P, const float* radius, size_t k,
+                        float reach);
+// whether one of them flagged in `fast` (a byte a grain) lies within reach x (r_k + r_j)
+bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* radius,
+                         const uint8_t* fast, size_t k, float reach);
+
+}  // namespace grains

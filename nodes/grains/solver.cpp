@@ -567,6 +567,7 @@ bool GrainsSolver::sleep_rows_on_device(const float* P, bool moved, const uint8_
   if (!candidates_on_ || !device_.rows_stale) return false;
   out->resize(n_);
   const bool there = !moved && P == written_on_device_;
+  if (!there) written_on_device_ = nullptr;  // the device's copy of them is replaced
   if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data()))
     return false;
   for (const uint32_t w : *out)

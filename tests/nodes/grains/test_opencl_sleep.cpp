@@ -29,8 +29,10 @@ TEST_CASE(
   std::vector<float> moved = sc.P;
   for (size_t k = 0; k < n; k += 5) moved[3 * k] += 0.3f * sc.pscale[k];
   std::vector<uint32_t> written, shifted;
-  REQUIRE(sc.solver.sleep_rows_on_device(sc.P.data(), false, fast.data(), &written));
+  // the moved positions first: they replace the written ones on the device, which must then be
+  // sent again
   REQUIRE(sc.solver.sleep_rows_on_device(moved.data(), true, fast.data(), &shifted));
+  REQUIRE(sc.solver.sleep_rows_on_device(sc.P.data(), false, fast.data(), &written));
   CHECK(sc.solver.sleep_rows_device() == 2);
   const NeighborList& rows = *sc.solver.candidates();  // brings the rows to the host
   // once the host holds them, the counts are its own

@@ -267,11 +267,12 @@ class GrainsNode : public Node {
     // on the device while they stay there (use_opencl), else along the host's (sleep_rows.h)
     const bool there = solver_.sleep_rows_on_device(P_.data(), moved, fast_.data(), &row_words_);
     const NeighborList* rows = there ? nullptr : solver_.candidates();
-    // the grains within reach x (r_k + r_j) of grain k, reach GR_SLEEP_NEAR or GR_SLEEP_KEPT
-    auto touching = [&](size_t k, float reach) -> int32_t {
+    // the grains within GR_SLEEP_NEAR x (r_k + r_j) of grain k, or within GR_SLEEP_KEPT x
+    // (r_k + r_j) when `kept`
+    auto touching = [&](size_t k, bool kept) -> int32_t {
       if (there)
-        return static_cast<int32_t>((row_words_[k] >> (reach == GR_SLEEP_NEAR ? 0 : 15)) &
-                                    GR_SLEEP_COUNT_MAX);
+        return static_cast<int32_t>((row_words_[k] >> (kept ? 15 : 0)) & GR_SLEEP_COUNT_MAX);
+      const float reach = kept ? GR_SLEEP_KEPT : GR_SLEEP_NEAR;
       return rows ? static_cast<int32_t>(sleep_row_near(*rows, P_.data(), r_.data(), k, reach)) : 0;
     };
     auto fast_near = [&](size_t k) {
@@ -295,7 +296,7 @@ class GrainsNode : public Node {
         // a contact it slept on is gone: a grain 1.05 radii-sums away when it fell asleep is
         // counted until 1.25 (an awake neighbour's jiggle does not wake it); or an awake
         // neighbour within 1.05 moves fast
-        if (touching(k, GR_SLEEP_KEPT) < touched[idx_[k]] || fast_near(k)) woken_[k] = 1;
+        if (touching(k, true) < touched[idx_[k]] || fast_near(k)) woken_[k] = 1;
       }
     }
     for (size_t k = 0; k < n; ++k) {
@@ -311,7 +312,7 @@ class GrainsNode : public Node {
       if (T[i] >= st.sleep_time) {
         store3(v_.data(), k, Vec3{});
         store3(a_slept, i, load3(F, i) / awake_mass_[k]);
-        touched[i] = touching(k, GR_SLEEP_NEAR);
+        touched[i] = touching(k, false);
       }
     }
   }

@@ -243,7 +243,6 @@ struct Iterations::Impl {
   // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
   void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
     if (!host) return;
-    forget(b);
     b.reserve(ctx, std::max(bytes, device_bytes), largest);
     send(b, host, bytes);
   }

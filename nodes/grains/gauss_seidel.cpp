@@ -453,6 +453,19 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     gd.P = start;  // the device pre-stabilizes its own copy of the start
     if (!others.nbr_offsets) gd.nbr_offsets = gd.nbr_indices = nullptr, size.pair_entries = 0;
     if (!c.shapes_on) {
+      // the substep's end there too (write_back takes what it wrote), unless the host reads the
+      // passes' positions: for the impact data
+      opencl::SequentialSolve::Finish end;
+      finished_there_ = !c.impacts && !c.s.host_finish;
+      if (finished_there_) {
+        end_P_.resize(3 * n);
+        end_v_.resize(c.s.keep_velocity ? 0 : 3 * n);
+        end.P_out = end_P_.data();
+        end.v_out = c.s.keep_velocity ? nullptr : end_v_.data();
+        end.force = device_force(g, &end.force_uniform);
+        end.origin[0] = c.origin.x, end.origin[1] = c.origin.y, end.origin[2] = c.origin.z;
+        on_device.finish = &end;
+      }
       cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);
     } else {
       // the contacts and the grains' arrays stay on the device between the passes (only the

@@ -567,8 +567,11 @@ bool GrainsSolver::sleep_rows_on_device(const float* P, bool moved, const uint8_
   if (!candidates_on_ || !device_.rows_stale) return false;
   out->resize(n_);
   const bool there = !moved && P == written_on_device_;
-  if (!there) written_on_device_ = nullptr;  // the device's copy of them is replaced
-  if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data()))
+  // or, where the device ended the substep, the positions it wrote but for those the host moved
+  const std::vector<gr_uint>* written =
+      !there && !moved && finished_there_ && P == finish_P_ ? &end_changed_ : nullptr;
+  written_on_device_ = P;  // the device's copy of them is replaced, or patched, or theirs
+  if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data(), written))
     return false;
   for (const uint32_t w : *out)
     if (w & GR_SLEEP_OVER) return false;
@@ -606,6 +609,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   candidates_on_ = false;
   p_on_device_ = planes_on_device_ = false;
   written_on_device_ = nullptr;
+  finished_there_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   // the device's calls of this substep may share the arrays bind_inputs makes, which hold their
@@ -1288,15 +1292,25 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   const bool final_test = s.final_collision_test && colliders_on;
   std::vector<uint8_t> still(collider_count);
   for (size_t c = 0; c < collider_count; ++c) still[c] = colliders[c].still() ? 1 : 0;
+  // the device's end of the substep (finished_there_), whose positions it keeps: the grains
+  // the final collision test moves are listed for contact_stats
+  const bool there = finished_there_;
+  if (there) end_hit_.assign(final_test ? d.n : 0, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     int ii = static_cast<int>(i);
-    gr_float3 Pk, vk;
-    gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
-    if (s.keep_velocity) vk = gr_load3(d.v, ii);
-    // back to world space (exact for a grain that stays: see local_origin)
     const Vec3 a = load3(d.P, i);
-    Vec3 b = to_vec(Pk) + origin, v = to_vec(vk);
+    Vec3 b, v;
+    if (there) {
+      b = load3(end_P_.data(), i);
+      v = load3(s.keep_velocity ? d.v : end_v_.data(), i);
+    } else {
+      gr_float3 Pk, vk;
+      gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);
+      if (s.keep_velocity) vk = gr_load3(d.v, ii);
+      // back to world space (exact for a grain that stays: see local_origin)
+      b = to_vec(Pk) + origin, v = to_vec(vk);
+    }
     const Vec3 v_loop = v;
     int32_t hit = -1;
     Vec3 hit_n;
@@ -1305,6 +1319,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
                        s.static_threshold, s.scale_kinetic};
       final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,
                       &hit_n);
+      if (there && hit >= 0) end_hit_[i] = 1;
     }
     store3(d.P, i, b);
     store3(d.v, i, v);
@@ -1334,6 +1349,27 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
       store3(d.impact_point, slot, b - n_c * radius_[i]);
     }
   }
+  finish_P_ = d.P;
+  end_changed_.clear();
+  for (size_t i = 0; i < end_hit_.size(); ++i)
+    if (end_hit_[i]) end_changed_.push_back(static_cast<gr_uint>(i));
+}
+
+const float* GrainsSolver::device_force(const gr_grains& g, bool* uniform) {
+  *uniform = false;
+  if (!g.force) return nullptr;
+  const size_t n = n_;
+  auto row = [&](size_t i) { return g.force + 3 * size_t(g.force_index ? g.force_index[i] : i); };
+  const float* first = row(0);
+  bool same = true;
+  for (size_t i = 1; same && i < n; ++i) same = std::memcmp(row(i), first, 3 * sizeof(float)) == 0;
+  if (same) {
+    *uniform = true;
+    return first;
+  }
+  end_force_.resize(3 * n);
+  for (size_t i = 0; i < n; ++i) std::copy_n(row(i), 3, &end_force_[3 * i]);
+  return end_force_.data();
 }
 
 // Overlap statistics of the written positions over the neighbour rows, serial in a fixed order
@@ -1344,8 +1380,11 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
   double contacts = 0, sum = 0;
   float largest = 0;
   opencl::Iterations::RowOverlaps there;
-  if (device_.rows_stale &&
-      device_.device->row_overlaps(d.P, rows_true_radius_ ? nullptr : radius_, n, &there)) {
+  // the positions the device's end of the substep wrote there, but those write_back changed
+  const std::vector<gr_uint>* written =
+      finished_there_ && d.P == finish_P_ ? &end_changed_ : nullptr;
+  if (device_.rows_stale && device_.device->row_overlaps(d.P, rows_true_radius_ ? nullptr : radius_,
+                                                         n, &there, written)) {
     contacts = there.contacts, largest = there.largest, sum = there.sum;
     written_on_device_ = d.P;
   } else {

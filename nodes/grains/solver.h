@@ -71,6 +71,10 @@ struct GrainsSettings {
   // index. The solver takes it by itself for such a device (use_opencl on a GPU); set, the CPU
   // path sweeps the device's order (the tests compare the two)
   bool sweep_waves = false;
+  // use_opencl with gauss_seidel: the host ends the substep (velocity update) even where the
+  // device could (SequentialSolve::Finish), bringing the solved positions back (the tests
+  // compare the two)
+  bool host_finish = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -192,6 +196,11 @@ class GrainsSolver {
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
+  // whether the device ended the last substep (velocity update, SequentialSolve::Finish), and
+  // then how many grains the host's final collision test moved after it (their positions alone
+  // go up for the overlap statistics)
+  bool finished_on_device() const { return finished_there_; }
+  size_t finish_changed() const { return finished_there_ ? end_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
   // until the next substep
@@ -297,6 +306,18 @@ class GrainsSolver {
   bool p_on_device_ = false;
   // the written positions (d.P) error control's statistics sent to the device this substep
   mutable const float* written_on_device_ = nullptr;
+  // gauss_seidel's device solve ended the substep there (SequentialSolve::Finish): each grain's
+  // written position (world) and velocity in end_P_ and end_v_ (n x 3), which write_back takes
+  // for its own; the device keeps those positions, and write_back lists in end_changed_ the
+  // grains its final collision test moved, which contact_stats and the sleeping test send alone
+  bool finished_there_ = false;
+  const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
+  // g's force as the device reads it at the substep's end: null (none), one row that every
+  // grain reads (*uniform), else a copy of each grain's row (end_force_)
+  const float* device_force(const gr_grains& g, bool* uniform);
+  std::vector<float> end_P_, end_v_, end_force_;
+  std::vector<gr_uint> end_changed_;
+  std::vector<uint8_t> end_hit_;
   size_t sleep_rows_device_ = 0;  // sleep_rows_device()
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;

@@ -41,6 +41,7 @@ typedef struct {
   const GR_GLOBAL float* v;        /* (n x 3) m/s, start of substep */
   const GR_GLOBAL float* force;    /* (n x 3) N, or (points x 3) read through force_index */
   const GR_GLOBAL gr_uint* force_index; /* (n) optional: grain i's row of force */
+  int force_uniform; /* 1: every grain's force is force's first row (a device's one-row copy) */
   const GR_GLOBAL float* mass;     /* (n) kg */
   const GR_GLOBAL float* radius;   /* (n) m */
   const GR_GLOBAL float* inv_mass; /* (n) 1/kg: 1/mass, or 1/shockmass with global mass-shock */

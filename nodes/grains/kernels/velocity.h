@@ -12,7 +12,7 @@
 GR_INLINE gr_float3 gr_predicted_velocity(const gr_grains* g, const gr_params* prm, int i) {
   gr_float3 v = gr_load3(g->v, i);
   if (g->force && g->mass[i] > 0.0f) {
-    const int f = g->force_index ? (int)g->force_index[i] : i;
+    const int f = g->force_uniform ? 0 : (g->force_index ? (int)g->force_index[i] : i);
     v = gr_madd(v, gr_load3(g->force, f), prm->dt / g->mass[i]);
   }
   return v;

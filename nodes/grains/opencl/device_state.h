@@ -164,6 +164,16 @@ struct Iterations::Impl {
   // kernel, its fast flags and its words
   cl_kernel row_overlaps = nullptr, row_reach = nullptr, sleep_rows = nullptr;
   Buffer stats_P, stats_part, sleep_fast, sleep_out;
+  // the substep's end (gr_k_finish), which writes the grains' positions into stats_P: for how
+  // many grains it last did (0: stats_P holds positions sent since, or none); the grains the
+  // host then changed go up through patch_index and patch_values (patch_positions)
+  cl_kernel finish = nullptr, scatter3 = nullptr;
+  size_t written_n = 0;
+  Buffer force, end_v, patch_index, patch_values;
+  std::vector<float> patch_host;
+  // x's grains that `changed` lists (ascending) take their positions in P (n x 3), which go up
+  // alone
+  void patch_positions(Buffer& x, const float* P, const std::vector<gr_uint>& changed);
   // the collider planes (planes.cpp): the kernels, the colliders and the predicted positions
   // they read (the search's nb_P when it took these; the start positions, radii and inverse
   // masses are arrays[kP], [kRadius] and [kInvMass], or the search's nb_radius); the rows and
@@ -186,7 +196,8 @@ struct Iterations::Impl {
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
-                      &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p})
+                      &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
+                      &force, &end_v, &patch_index, &patch_values})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -194,7 +205,8 @@ struct Iterations::Impl {
                         seq_table, seq_lookup, seq_loaded, seq_waves, seq_wave_starts,
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
-                        row_overlaps, row_reach, sleep_rows, plane_count, plane_fill})
+                        row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
+                        finish, scatter3})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -217,6 +217,43 @@ __kernel void gr_k_warm_take_back(gr_params prm, GR_GRAINS_ARGS, __global float*
   }
 }
 
+/* The substep's end (kernels/velocity.h, gr_update_velocity): grain i's position written back
+ * in world coordinates (the substep's plus the origin, as the host adds them) into P_out and its
+ * velocity into v_out (null: the host keeps its own). v: the start velocity as pre-stabilization
+ * left it; force: a row a grain, or one row for every grain (force_uniform), or null. */
+__kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v,
+                          __global const float* force, int force_uniform, __global const float* p,
+                          float origin_x, float origin_y, float origin_z, __global float* P_out,
+                          __global float* v_out, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_float3 end, velocity;
+    g.v = v;
+    g.force = force;
+    g.force_uniform = force_uniform;
+    gr_update_velocity(&g, &prm, p, i, &end, &velocity);
+    P_out[3 * i] = end.x + origin_x;
+    P_out[3 * i + 1] = end.y + origin_y;
+    P_out[3 * i + 2] = end.z + origin_z;
+    if (v_out) gr_store3(v_out, i, velocity);
+  }
+}
+
+/* the grains index[k] of P take the positions values[k] (3 floats each), k < count */
+__kernel void gr_k_scatter3(__global float* P, __global const gr_uint* index,
+                            __global const float* values, int count) {
+  const int k = (int)get_global_id(0);
+  if (k >= count) return;
+  {
+    const gr_uint i = index[k];
+    P[3 * i] = values[3 * k];
+    P[3 * i + 1] = values[3 * k + 1];
+    P[3 * i + 2] = values[3 * k + 2];
+  }
+}
+
 /* block sweeps, colour by colour as the passes: each block's contacts in order add their
  * scaled loads to what their grains receive (repeat), or scale and apply them to p (seq, normal
  * and factor the part's, from contact base on) */

@@ -639,9 +639,34 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
 
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
-  m.download(*result, p, 3 * n * f);
-  if (w.x) m.download(m.stable, w.x, 3 * n * f);
-  if (w.take_back) m.download(m.velocity, w.v, 3 * n * f);
+  if (const SequentialSolve::Finish* end = w.finish) {
+    // the substep's end here: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n
+    // (the start velocities as pre-stabilization left them, or as they are)
+    if (!velocities) m.upload(m.velocity, g.v, 3 * n * f);
+    const int uniform = end->force_uniform ? 1 : 0;
+    m.upload(m.force, end->force, (uniform ? 3 : 3 * n) * f);
+    m.stats_P.reserve(m.ctx, 3 * n * f, m.largest);
+    if (end->v_out) m.end_v.reserve(m.ctx, 3 * n * f, m.largest);
+    cl_kernel k = m.kernel(m.finish, "gr_k_finish");
+    m.set_grains(k, prm, g, inputs);
+    set_buffer(k, kFirstOwn, &m.velocity);
+    set_buffer(k, kFirstOwn + 1, end->force ? &m.force : nullptr);
+    check(clSetKernelArg(k, kFirstOwn + 2, sizeof(int), &uniform), "clSetKernelArg");
+    set_buffer(k, kFirstOwn + 3, result);
+    for (cl_uint a = 0; a < 3; ++a)
+      check(clSetKernelArg(k, kFirstOwn + 4 + a, sizeof(float), &end->origin[a]), "clSetKernelArg");
+    set_buffer(k, kFirstOwn + 7, &m.stats_P);
+    set_buffer(k, kFirstOwn + 8, end->v_out ? &m.end_v : nullptr);
+    check(clSetKernelArg(k, kFirstOwn + 9, sizeof(int), &count), "clSetKernelArg");
+    per_grain(k);
+    m.written_n = n;
+    m.download(m.stats_P, end->P_out, 3 * n * f);
+    m.download(m.end_v, end->v_out, 3 * n * f);
+  } else {
+    m.download(*result, p, 3 * n * f);
+    if (w.x) m.download(m.stable, w.x, 3 * n * f);
+    if (w.take_back) m.download(m.velocity, w.v, 3 * n * f);
+  }
   if (!s.stay) m.download_contacts(s);
   if (s.loaded) {
     gr_uint count_loaded = 0;
@@ -653,6 +678,23 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     m.download(m.seq_loaded_count, &count_loaded, sizeof count_loaded);
     *s.loaded = count_loaded;
   }
+}
+
+void Iterations::Impl::patch_positions(Buffer& x, const float* P,
+                                       const std::vector<gr_uint>& changed) {
+  const size_t count = changed.size();
+  if (count == 0) return;
+  // (held here: the upload may still read them after this returns)
+  std::vector<float>& values = patch_host;
+  values.resize(3 * count);
+  for (size_t k = 0; k < count; ++k)
+    std::copy_n(P + 3 * size_t(changed[k]), 3, values.begin() + 3 * k);
+  upload(patch_index, changed.data(), count * sizeof(gr_uint));
+  upload(patch_values, values.data(), values.size() * sizeof(float));
+  cl_kernel k = kernel(scatter3, "gr_k_scatter3");
+  const int items = static_cast<int>(count);
+  arg(k, 0, x), arg(k, 1, patch_index), arg(k, 2, patch_values), arg(k, 3, items);
+  launch(k, count);
 }
 
 void Iterations::order_waves(const gr_uint* colour_blocks, const gr_uint* colour_start,

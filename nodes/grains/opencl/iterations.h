@@ -3,16 +3,16 @@
 // the collider planes (find_planes()), the Jacobi path's pre-stabilization (stabilize()),
 // iterations and friction passes (run()), and contact_solver gauss_seidel's list
 // (build_sequential()) and its solve from its contacts on (solve_sequential():
-// pre-stabilization, the velocity it takes back, the warm start and the passes;
-// run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
+// pre-stabilization, the velocity it takes back, the warm start, the passes and the velocity
+// update; run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
 // (prediction, a mesh collider's planes, contact history, the contact list where the device
-// does not build it; velocity, final collisions, history, strain) and hands each call its
-// inputs. The kernels call the functions the CPU loops call (kernels/, engine/pair_test.h,
-// engine/collider_shape.h; grains.cl). Each
-// per-grain work-item writes only its own grain and sums in row order; each Gauss-Seidel
-// work-group sweeps one block of contacts wave by wave, its work-items sharing a wave, no two
-// blocks at once and no two contacts of a wave writing one grain; integer atomics only count: a
-// device gives the same result run to run, the CPU's sweep's in the same order.
+// does not build it; the Jacobi path's velocity update, final collisions, history, strain) and
+// hands each call its inputs. The kernels call the functions the CPU loops call (kernels/,
+// engine/pair_test.h, engine/collider_shape.h; grains.cl). Each per-grain work-item writes only its
+// own grain and sums in row order; each Gauss-Seidel work-group sweeps one block of contacts wave
+// by wave, its work-items sharing a wave, no two blocks at once and no two contacts of a wave
+// writing one grain; integer atomics only count: a device gives the same result run to run, the
+// CPU's sweep's in the same order.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -105,6 +105,20 @@ struct SequentialSolve {
   bool take_back = false;
   float* v = nullptr;
   float inv_last = 0.0f;
+  // The substep's end there (gr_k_finish: gr_update_velocity), instead of bringing back p, the
+  // pre-stabilized start (x) and the velocities: each grain's written position, in world
+  // coordinates (the substep's plus origin, as GrainsSolver::write_back adds them), into P_out
+  // and, when v_out is set, its velocity (3 n floats each). force: gr_grains' force as the
+  // device reads it, a row a grain (3 n floats) or, with force_uniform, one row for every
+  // grain; null: none. The written positions stay there for row_overlaps() (written_there).
+  struct Finish {
+    float* P_out = nullptr;
+    float* v_out = nullptr;
+    const float* force = nullptr;
+    bool force_uniform = false;
+    float origin[3] = {0.0f, 0.0f, 0.0f};
+  };
+  const Finish* finish = nullptr;
 };
 
 // What crosses between the host and the device: bytes each way, and the transfers that carried
@@ -160,14 +174,18 @@ class Iterations {
     float largest = 0;
     double sum = 0;
   };
-  bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out);
+  // written_there: the device holds P as the last solve's finish wrote it (SequentialSolve::
+  // Finish), but for the grains this lists, which go up alone (all of P goes up when the
+  // device holds no such positions of n grains).
+  bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,
+                    const std::vector<gr_uint>* written_there = nullptr);
   bool row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach);
   // The grains node's sleeping test's reads along those rows: each grain's word (gr_row_sleep)
   // into out (n) at the world positions P (n x 3, uploaded; null: those the last row_overlaps()
-  // took) with the radii `radius` (n, as row_overlaps takes them) and a byte a grain, `fast`.
-  // False when the device holds no rows of n grains.
-  bool sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n,
-                  uint32_t* out);
+  // took) with the radii `radius` (n, as row_overlaps takes them) and a byte a grain, `fast`;
+  // written_there as row_overlaps'. False when the device holds no rows of n grains.
+  bool sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n, uint32_t* out,
+                  const std::vector<gr_uint>* written_there = nullptr);
 
   // the Jacobi path's pre-stabilization (gr_stabilize) of the start positions x (3 n + 1
   // floats, in and out): pass after pass while go_on(pass, the largest move over a radius)
@@ -177,8 +195,9 @@ class Iterations {
 
   // contact_solver gauss_seidel's solve from its contacts on, in one call (gauss_seidel.cpp's
   // steps in its order, with one upload and one download): pre-stabilization when w.x is set,
-  // the velocity it takes back when w.carried is, the warm start when w.loaded is, then
-  // `iterations` passes as run_sequential's. p (3 n + 1 floats) and s.contacts in and out.
+  // the velocity it takes back when w.take_back is, the warm start when w.loaded is, then
+  // `iterations` passes as run_sequential's, and the velocity update when w.finish is set.
+  // p (3 n + 1 floats; not written with w.finish) and s.contacts in and out.
   void solve_sequential(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
                         float* p, const SequentialContacts& s, const SequentialSolve& w,
                         int iterations);

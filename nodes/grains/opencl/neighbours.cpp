@@ -213,13 +213,19 @@ void Iterations::fetch_rows(NeighborList& out) {
   m.download(m.nb_indices, out.indices.data(), out.indices.size() * sizeof(gr_uint));
 }
 
-bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out) {
+bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,
+                              const std::vector<gr_uint>* written_there) {
   Impl& m = *impl_;
   if (!m.rows_found || !m.row_overlaps || n != m.rows_grains) return false;
   *out = RowOverlaps{};
   if (n == 0) return true;
   const size_t f = sizeof(float), runs = kBoundsItems;
-  m.upload(m.stats_P, P, 3 * n * f);
+  if (written_there && m.written_n == n) {
+    m.patch_positions(m.stats_P, P, *written_there);
+  } else {
+    m.upload(m.stats_P, P, 3 * n * f);
+    m.written_n = 0;
+  }
   Buffer& rb = radius ? m.arrays[kRadius] : m.nb_radius;
   m.upload_once(rb, radius, n * f);
   m.stats_part.reserve(m.ctx, 3 * runs * sizeof(double), m.largest);
@@ -261,12 +267,15 @@ bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_
 }
 
 bool Iterations::sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n,
-                            uint32_t* out) {
+                            uint32_t* out, const std::vector<gr_uint>* written_there) {
   Impl& m = *impl_;
   if (!m.rows_found || !m.sleep_rows || n != m.rows_grains) return false;
   if (n == 0) return true;
   const size_t f = sizeof(float);
-  if (P) m.upload(m.stats_P, P, 3 * n * f);
+  if (P && written_there && m.written_n == n)
+    m.patch_positions(m.stats_P, P, *written_there);
+  else if (P)
+    m.upload(m.stats_P, P, 3 * n * f), m.written_n = 0;
   m.upload_once(m.arrays[kRadius], radius, n * f);
   m.upload(m.sleep_fast, fast, n);
   m.sleep_out.reserve(m.ctx, n * sizeof(gr_uint), m.largest);

@@ -85,6 +85,7 @@ struct Scene {
   std::vector<Vec3> extra_force;  // per grain, added to mass * gravity (optional)
   float time = 0;
   GrainsStats stats;
+  bool with_stats = true;  // the solver gives stats (error control's overlap statistics)
   std::vector<uint8_t> dead;
 
   size_t size() const { return mass.size(); }
@@ -160,7 +161,7 @@ struct Scene {
       }
     }
     GrainsData d = data();
-    solver.substep(d, s, colliders.data(), colliders.size(), &stats);
+    solver.substep(d, s, colliders.data(), colliders.size(), with_stats ? &stats : nullptr);
     remove_dead();
     time += s.dt;
   }

@@ -12,19 +12,23 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
           "[opencl][gauss_seidel]") {
   // The default gauss_seidel, its contact list built and kept on the device (the contact-list
   // tests' 512 grains falling onto the ground, 120 substeps: some build a list, the rest keep
-  // it). The host predicts and finishes the substep, so these cross for each grain:
+  // it). The host predicts and runs the final collision test, so these cross for each grain:
   //  up: the predicted positions (12 B), which the search of rows or planes takes and the solve
   //      copies there; the start positions (12), radii (4), inverse masses (4) and masses (4),
   //      each sent once a substep (Iterations::begin_substep) though three calls read them; the
-  //      velocities (12), from which pre-stabilization's carried moves are taken back; the end
-  //      positions (12), for error control's overlap statistics: 60 B;
+  //      velocities (12), from which pre-stabilization's carried moves are taken back and the
+  //      velocity update predicts: 48 B;
   //  down: the rows' offsets of the planes (4) and, after a search, of the neighbours (4); the
-  //      solved and the pre-stabilized positions and the velocities (36): 44 B at most;
-  // and 4 B a plane entry down (its collider), 136 B a collider up. Beside these a substep
-  // moves flags and per-block results (this scene is one block: a pass's largest move, a
-  // round's flag, the built list's starts and links), under 1 KiB up and 4 KiB down, and reads
-  // the partial results of its reductions, 1,024 runs each: the overlap statistics (3 doubles a
-  // run), the rows' box (7 floats) and the rows' reach (1 float), 57,344 B.
+  //      written positions and velocities (24), which the device's velocity update made: 32 B
+  //      at most;
+  // and 4 B a plane entry down (its collider), 136 B a collider up, 12 B for the force (gravity:
+  // one row for every grain), and 16 B for each grain the final collision test moved (its
+  // index and position, for error control's overlap statistics, which read the rest where the
+  // device wrote them). Beside these a substep moves flags and per-block results (this scene is
+  // one block: a pass's largest move, a round's flag, the built list's starts and links), under
+  // 1 KiB up and 4 KiB down, and reads the partial results of its reductions, 1,024 runs each:
+  // the overlap statistics (3 doubles a run), the rows' box (7 floats) and the rows' reach (1
+  // float), 57,344 B.
   test::Scene sc = test::layered_block(true);
   const double n = double(sc.size()), colliders = double(sc.colliders.size());
   const double runs = 1024 * (3 * 8 + 7 * 4 + 4);
@@ -42,8 +46,11 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
     INFO("substep " << k << (list_kept ? ", list kept" : ", list built") << ": sent " << sent / n
                     << " B a grain, received " << received / n << ", " << entries
                     << " plane entries");
-    CHECK(sent <= 60 * n + 136 * colliders + 1024);
-    CHECK(received <= 44 * n + 4 * entries + runs + 4096);
+    const double moved = double(sc.solver.finish_changed());
+    INFO(moved << " grains moved by the final collision test");
+    CHECK(sc.solver.finished_on_device());
+    CHECK(sent <= 48 * n + 12 + 16 * moved + 136 * colliders + 1024);
+    CHECK(received <= 32 * n + 4 * entries + runs + 4096);
   }
   // the premise: both kinds of substep were measured
   INFO(built << " substeps built a list, " << kept << " kept one");

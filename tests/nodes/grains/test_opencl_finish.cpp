@@ -1,0 +1,130 @@
+// The substep's end on the OpenCL device (gr_k_finish, opencl::SequentialSolve::Finish): the
+// velocity update there, its written positions kept there for error control's overlap
+// statistics, and the grains the host's final collision test moves sent alone.
+#include <catch2/catch.hpp>
+#include <cfloat>
+#include <cmath>
+#include <vector>
+
+#include "tests/nodes/grains/grains_harness.h"
+
+using namespace grains;
+
+namespace {
+
+// Ends one substep of `start` on the host (GrainsSettings::host_finish) and on the device, both
+// from the same state, and checks that the two agree: the same solve, so the same solved
+// positions; the device's velocity update (gr_update_velocity) writes them as the host does
+// (the solved position plus the origin, or the start for a drifting grain: no arithmetic that
+// rounds differently), so the written positions are the same bits, and so are error control's
+// statistics of them, read where the device wrote them. The velocities may differ in their last
+// bits: each side may fuse a multiply and an add where the other does not, in the predicted
+// velocity v + dt F / m (one rounding: 2 eps (|v| + dt |F| / m)) and in the blend and the caps
+// that follow, each a few roundings of |v_new| + |v_pred|: within 8 eps (|v_new| + |v| +
+// dt |F| / m) of each other. Returns the grains the final collision test moved on the device;
+// *rows_there: whether the statistics were read there.
+size_t check_finish(const test::Scene& start, bool* rows_there = nullptr) {
+  test::Scene host = start, device = start;
+  host.s.host_finish = true;
+  device.s.host_finish = false;
+  host.substep();
+  device.substep();
+  REQUIRE(!host.solver.finished_on_device());
+  REQUIRE(device.solver.finished_on_device());
+  CHECK(host.P == device.P);
+  const float dt = start.s.dt;
+  size_t worse = 0;
+  for (size_t i = 0; i < start.size(); ++i) {
+    const Vec3 f =
+        start.gravity * start.mass[i] + (start.extra_force.empty() ? Vec3{} : start.extra_force[i]);
+    const float pull = start.mass[i] > 0 ? dt * length(f) / start.mass[i] : 0.0f;
+    const float bound = 8 * FLT_EPSILON * (length(host.vel(i)) + length(start.vel(i)) + pull);
+    if (length(host.vel(i) - device.vel(i)) > bound) ++worse;
+  }
+  CHECK(worse == 0);
+  CHECK(host.stats.contacts == device.stats.contacts);
+  CHECK(host.stats.max_penetration == device.stats.max_penetration);
+  CHECK(host.stats.mean_penetration == device.stats.mean_penetration);
+  // and so are the sleeping test's counts of near neighbours, read where the statistics took
+  // the positions (the host's side sent all of them), when the device holds the rows (a copied
+  // solver's device holds none until it searches again)
+  const std::vector<uint8_t> fast(start.size(), 0);
+  std::vector<uint32_t> host_words, device_words;
+  const bool there =
+      host.solver.sleep_rows_on_device(host.P.data(), false, fast.data(), &host_words);
+  CHECK(device.solver.sleep_rows_on_device(device.P.data(), false, fast.data(), &device_words) ==
+        there);
+  CHECK(host_words == device_words);
+  if (rows_there) *rows_there = there;
+  return device.solver.finish_changed();
+}
+
+}  // namespace
+
+TEST_CASE("use_opencl: the device ends the substep as the host does", "[opencl][gauss_seidel]") {
+  // The contact-list tests' 512 grains falling onto the ground, ended on both sides after 30
+  // substeps (in the fall, the lower layers landing) and after 90 (at rest): with gravity (one
+  // force row for every grain), and in the fall with a force of each grain's own (a row a grain)
+  // and with the velocity blended, capped in acceleration and speed, and a drift threshold, and
+  // moved 96 m away along x and z (the substep's coordinates then have an origin of their own,
+  // which the written positions add back: solver.cpp, local_origin); at
+  // rest with the start velocity kept (error control's first finer substep: no velocity comes
+  // back).
+  test::Scene sc = test::layered_block(true);
+  int done = 0;
+  for (const int settle : {30, 90}) {
+    for (; done < settle; ++done) sc.substep();
+    // (each copy opens a device of its own, a few seconds on PoCL: the variants that read what
+    // moves in the fall, the force and the caps, are ended in it, the kept velocity at rest)
+    for (const int variant : settle == 30 ? std::vector<int>{0, 1, 3, 4} : std::vector<int>{0, 2}) {
+      test::Scene start = sc;
+      if (variant == 1)
+        for (size_t i = 0; i < start.size(); ++i)
+          start.extra_force.push_back({0.1f * float(i % 7), 0.0f, -0.05f * float(i % 5)});
+      if (variant == 2) start.s.keep_velocity = true;
+      if (variant == 3) {
+        start.s.velocity_blend = 0.3f;
+        start.s.max_acceleration = 20.0f;
+        start.s.max_speed = 1.5f;
+        start.s.drift_threshold = 0.01f;
+      }
+      if (variant == 4)  // far from the world's origin: the substep works about another
+        for (size_t i = 0; i < start.size(); ++i)
+          start.P[3 * i] += 96.0f, start.P[3 * i + 2] += 96.0f;
+      INFO("after " << settle << " substeps, variant " << variant);
+      check_finish(start);
+    }
+  }
+}
+
+TEST_CASE("use_opencl: grains the final collision test moves reach the device's statistics",
+          "[opencl][gauss_seidel]") {
+  // 16 grains shot at 30 m/s at a plate thinner than their radius, each above a fixed grain
+  // hanging under the plate: in one substep of 1/240 s a shot grain would move 0.125 m, through
+  // the plate onto the fixed one, and the passes leave it just under the fixed grain (measured:
+  // touching it). Only the final collision test's sweep sees that it came through and puts it
+  // back on top, far from the fixed grain. The device wrote the solved positions; the host's
+  // are sent for the 16 shot grains alone, and the statistics and the sleeping test's counts
+  // must be those of the positions the host holds (check_finish): no shot grain near a fixed
+  // one. Without the statistics the sleeping test sends them.
+  test::Scene sc;
+  sc.s = test::settings(24, 10, 10);
+  sc.s.contact_solver = kContactGaussSeidel;
+  sc.s.use_opencl = true;
+  sc.add_collider(test::box({0.15f, 0.0f, 0.15f}, {2.0f, 0.01f, 2.0f}));
+  for (int a = 0; a < 4; ++a)
+    for (int c = 0; c < 4; ++c) {
+      sc.add({0.1f * a, 0.06f, 0.1f * c}, 0.04f, 1.0f, {0.0f, -30.0f, 0.0f});
+      sc.add({0.1f * a, -0.1f, 0.1f * c}, 0.04f, 0.0f);  // fixed
+    }
+  // with the statistics, and without them (the sleeping test then sends the moved grains)
+  for (const bool with_stats : {true, false}) {
+    INFO((with_stats ? "with" : "without") << " the overlap statistics");
+    sc.with_stats = with_stats;
+    bool there = false;
+    const size_t moved = check_finish(sc, &there);
+    INFO(moved << " grains moved by the final collision test");
+    CHECK(moved == 16);
+    CHECK(there);
+  }
+}

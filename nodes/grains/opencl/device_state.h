@@ -3,7 +3,9 @@
 // kernels and the device buffers, which keep their size from call to call.
 #pragma once
 #include <algorithm>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -258,14 +260,35 @@ struct Iterations::Impl {
     b.reserve(ctx, std::max(bytes, device_bytes), largest);
     send(b, host, bytes);
   }
-  // copies `bytes` of host memory to the start of b, which holds them already
+  // copies `bytes` of host memory to the start of b, which holds them already. Memory that is
+  // one 4-byte word over and over (equal radii or masses, an attribute with one value) is
+  // filled there from that word instead: only the word crosses.
   void send(Buffer& b, const void* host, size_t bytes) {
     if (bytes == 0) return;
     forget(b);
-    check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
-          "clEnqueueWriteBuffer");
-    traffic.sent += bytes;
+    uint32_t word = 0;
+    if (repeated(host, bytes, &word)) {
+      check(clEnqueueFillBuffer(queue, b.mem, &word, sizeof word, 0, bytes, 0, nullptr, nullptr),
+            "clEnqueueFillBuffer");
+      traffic.sent += sizeof word;
+    } else {
+      check(clEnqueueWriteBuffer(queue, b.mem, CL_FALSE, 0, bytes, host, 0, nullptr, nullptr),
+            "clEnqueueWriteBuffer");
+      traffic.sent += bytes;
+    }
     ++traffic.uploads;
+  }
+  // whether `bytes` of host memory (64 or more) are one 4-byte word, *word, over and over
+  static bool repeated(const void* host, size_t bytes, uint32_t* word) {
+    if (bytes < 64 || bytes % sizeof(uint32_t) != 0) return false;
+    const unsigned char* at = static_cast<const unsigned char*>(host);
+    std::memcpy(word, at, sizeof *word);
+    for (size_t k = sizeof *word; k < bytes; k += sizeof *word) {
+      uint32_t next;
+      std::memcpy(&next, at + k, sizeof next);
+      if (next != *word) return false;
+    }
+    return true;
   }
   // `bytes` of b from byte `offset` on into host memory (waits for them)
   void download(Buffer& b, void* host, size_t bytes, size_t offset = 0) {

@@ -14,10 +14,11 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
   // tests' 512 grains falling onto the ground, 120 substeps: some build a list, the rest keep
   // it). The host predicts and runs the final collision test, so these cross for each grain:
   //  up: the predicted positions (12 B), which the search of rows or planes takes and the solve
-  //      copies there; the start positions (12), radii (4), inverse masses (4) and masses (4),
-  //      each sent once a substep (Iterations::begin_substep) though three calls read them; the
-  //      velocities (12), from which pre-stabilization's carried moves are taken back and the
-  //      velocity update predicts: 48 B;
+  //      copies there; the start positions (12), sent once a substep (Iterations::begin_substep)
+  //      though three calls read them; the velocities (12), from which pre-stabilization's
+  //      carried moves are taken back and the velocity update predicts: 36 B. The radii, masses
+  //      and inverse masses, equal for every grain here, are filled on the device from one word
+  //      each (4 B);
   //  down: the rows' offsets of the planes (4) and, after a search, of the neighbours (4); the
   //      written positions and velocities (24), which the device's velocity update made: 32 B
   //      at most;
@@ -49,7 +50,7 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
     const double moved = double(sc.solver.finish_changed());
     INFO(moved << " grains moved by the final collision test");
     CHECK(sc.solver.finished_on_device());
-    CHECK(sent <= 48 * n + 12 + 16 * moved + 136 * colliders + 1024);
+    CHECK(sent <= 36 * n + 12 + 16 * moved + 136 * colliders + 1024);
     CHECK(received <= 32 * n + 4 * entries + runs + 4096);
   }
   // the premise: both kinds of substep were measured

@@ -570,9 +570,10 @@ bool GrainsSolver::sleep_rows_on_device(const float* P, bool moved, const uint8_
   // or, where the device ended the substep, the positions it wrote but for those the host moved
   const std::vector<gr_uint>* written =
       !there && !moved && finished_there_ && P == finish_P_ ? &end_changed_ : nullptr;
-  written_on_device_ = P;  // the device's copy of them is replaced, or patched, or theirs
+  if (!there) written_on_device_ = nullptr;  // the device's copy of them is replaced
   if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data(), written))
     return false;
+  if (written) written_on_device_ = P;  // patched: the written positions are there
   for (const uint32_t w : *out)
     if (w & GR_SLEEP_OVER) return false;
   ++sleep_rows_device_;
@@ -1295,7 +1296,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   // the device's end of the substep (finished_there_), whose positions it keeps: the grains
   // the final collision test moves are listed for contact_stats
   const bool there = finished_there_;
-  if (there) end_hit_.assign(final_test ? d.n : 0, 0);
+  end_hit_.assign(there && final_test ? d.n : 0, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     int ii = static_cast<int>(i);

@@ -173,9 +173,9 @@ struct Iterations::Impl {
   size_t written_n = 0;
   Buffer force, end_v, patch_index, patch_values;
   std::vector<float> patch_host;
-  // x's grains that `changed` lists (ascending) take their positions in P (n x 3), which go up
-  // alone
-  void patch_positions(Buffer& x, const float* P, const std::vector<gr_uint>& changed);
+  // n grains' positions P (n x 3) into stats_P: only those written_there lists go up when the
+  // finish wrote n grains there (Iterations::row_overlaps), else all of them
+  void stats_positions(const float* P, size_t n, const std::vector<gr_uint>* written_there);
   // the collider planes (planes.cpp): the kernels, the colliders and the predicted positions
   // they read (the search's nb_P when it took these; the start positions, radii and inverse
   // masses are arrays[kP], [kRadius] and [kInvMass], or the search's nb_radius); the rows and

@@ -680,8 +680,14 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
 }
 
-void Iterations::Impl::patch_positions(Buffer& x, const float* P,
-                                       const std::vector<gr_uint>& changed) {
+void Iterations::Impl::stats_positions(const float* P, size_t n,
+                                       const std::vector<gr_uint>* written_there) {
+  if (!(written_there && written_n == n)) {
+    upload(stats_P, P, 3 * n * sizeof(float));
+    written_n = 0;
+    return;
+  }
+  const std::vector<gr_uint>& changed = *written_there;
   const size_t count = changed.size();
   if (count == 0) return;
   // (held here: the upload may still read them after this returns)
@@ -693,7 +699,7 @@ void Iterations::Impl::patch_positions(Buffer& x, const float* P,
   upload(patch_values, values.data(), values.size() * sizeof(float));
   cl_kernel k = kernel(scatter3, "gr_k_scatter3");
   const int items = static_cast<int>(count);
-  arg(k, 0, x), arg(k, 1, patch_index), arg(k, 2, patch_values), arg(k, 3, items);
+  arg(k, 0, stats_P), arg(k, 1, patch_index), arg(k, 2, patch_values), arg(k, 3, items);
   launch(k, count);
 }
 

@@ -220,12 +220,7 @@ bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, Row
   *out = RowOverlaps{};
   if (n == 0) return true;
   const size_t f = sizeof(float), runs = kBoundsItems;
-  if (written_there && m.written_n == n) {
-    m.patch_positions(m.stats_P, P, *written_there);
-  } else {
-    m.upload(m.stats_P, P, 3 * n * f);
-    m.written_n = 0;
-  }
+  m.stats_positions(P, n, written_there);
   Buffer& rb = radius ? m.arrays[kRadius] : m.nb_radius;
   m.upload_once(rb, radius, n * f);
   m.stats_part.reserve(m.ctx, 3 * runs * sizeof(double), m.largest);
@@ -272,10 +267,7 @@ bool Iterations::sleep_rows(const float* P, const float* radius, const uint8_t* 
   if (!m.rows_found || !m.sleep_rows || n != m.rows_grains) return false;
   if (n == 0) return true;
   const size_t f = sizeof(float);
-  if (P && written_there && m.written_n == n)
-    m.patch_positions(m.stats_P, P, *written_there);
-  else if (P)
-    m.upload(m.stats_P, P, 3 * n * f), m.written_n = 0;
+  if (P) m.stats_positions(P, n, written_there);
   m.upload_once(m.arrays[kRadius], radius, n * f);
   m.upload(m.sleep_fast, fast, n);
   m.sleep_out.reserve(m.ctx, n * sizeof(gr_uint), m.largest);

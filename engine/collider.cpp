@@ -122,18 +122,11 @@ float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal, float within)
 }
 
 float ColliderState::distance(const Vec3& p, Vec3* normal, float within) const {
-  if (shape.kind == ShapeKind::Mesh) {
-    Vec3 nl;
-    float d =
-        shape_distance(shape, pose.inverse(p), normal ? &nl : nullptr, within / pose.s) * pose.s;
-    if (normal) *normal = pose.rotate(nl);
-    return d;
-  }
-  const gr_shape sh = to_gr(shape);
-  const gr_pose q = to_gr(pose);
+  const gr_collider g = to_gr(*this);
   const float at[3] = {p.x, p.y, p.z};
   float n[3];
-  const float d = gr_placed_distance(&sh, &q, at, normal ? n : nullptr);
+  const float d =
+      gr_collider_distance_within(&g, at, normal ? n : nullptr, within, shape.mesh.get());
   if (normal) *normal = vec(n);
   return d;
 }
@@ -151,45 +144,44 @@ bool ColliderState::shell() const {
 }
 
 float ColliderState::shell_crossing(const Vec3& a, const Vec3& b, Vec3* at, Vec3* side) const {
-  if (!shell()) return 2.0f;
-  const Vec3 la = prev_pose.inverse(a), lb = pose.inverse(b);
-  Vec3 n;
-  const float t = shape.mesh->crossing(la, lb, &n);
-  if (!(t <= 1.0f)) return 2.0f;
-  *at = pose.apply(la + (lb - la) * t);
-  // the point came from the side its path leaves behind
-  *side = pose.rotate(dot(lb - la, n) > 0 ? -n : n);
+  const gr_collider g = to_gr(*this);
+  const float from[3] = {a.x, a.y, a.z}, to[3] = {b.x, b.y, b.z};
+  float x[3], n[3];
+  const float t = gr_collider_shell_crossing(&g, from, to, x, n, shape.mesh.get());
+  if (t <= 1.0f) *at = vec(x), *side = vec(n);
   return t;
 }
 
 bool ColliderState::still() const {
-  for (int k = 0; k < 9; ++k)
-    if (pose.R[k] != prev_pose.R[k]) return false;
-  return pose.t.x == prev_pose.t.x && pose.t.y == prev_pose.t.y && pose.t.z == prev_pose.t.z &&
-         pose.s == prev_pose.s;
+  const gr_collider g = to_gr(*this);
+  return gr_collider_still(&g) != 0;
 }
 
 float ColliderState::sweep(const Vec3& a, const Vec3& b, float radius) const {
-  // relative motion in the collider's local frame: start against the start pose, end against
-  // the end pose; then sphere-trace the segment against the static local shape
-  Vec3 la = prev_pose.inverse(a), lb = pose.inverse(b);
-  float r = radius / pose.s;
-  Vec3 d = lb - la;
-  float len = length(d);
-  // a step needs the distance only up to what is left of the segment (past it the trace ends)
-  float dist0 = shape_distance(shape, la, nullptr, 2 * r + len);
-  if (dist0 <= r) return 0.0f;
-  if (len <= 0) return 2.0f;
-  Vec3 dir = d / len;
-  float s = 0;
-  for (int it = 0; it < 256; ++it) {
-    float dist = shape_distance(shape, la + dir * s, nullptr, 2 * r + (len - s)) - r;
-    if (dist <= 1e-6f * (1.0f + len)) return s / len;
-    s += dist;
-    if (s > len) break;
-  }
-  // the end point may still be inside if tracing stopped short of it
-  return shape_distance(shape, lb, nullptr, 2 * r) <= r ? 1.0f : 2.0f;
+  const gr_collider g = to_gr(*this);
+  const float from[3] = {a.x, a.y, a.z}, to[3] = {b.x, b.y, b.z};
+  return gr_collider_sweep(&g, from, to, radius, shape.mesh.get());
 }
 
 }  // namespace grains
+
+// the shared functions' mesh queries (engine/collider_shape.h)
+float gr_mesh_distance(const void* mesh, const float* p, float* n, float within) {
+  grains::Vec3 nl;
+  const float d = static_cast<const grains::MeshShape*>(mesh)->distance({p[0], p[1], p[2]},
+                                                                        n ? &nl : nullptr, within);
+  if (n) n[0] = nl.x, n[1] = nl.y, n[2] = nl.z;
+  return d;
+}
+
+float gr_mesh_crossing(const void* mesh, const float* a, const float* b, float* n) {
+  grains::Vec3 nl;
+  const float t = static_cast<const grains::MeshShape*>(mesh)->crossing({a[0], a[1], a[2]},
+                                                                        {b[0], b[1], b[2]}, &nl);
+  n[0] = nl.x, n[1] = nl.y, n[2] = nl.z;
+  return t;
+}
+
+int gr_mesh_shell(const void* mesh) {
+  return static_cast<const grains::MeshShape*>(mesh)->closed() ? 0 : 1;
+}

@@ -210,4 +210,119 @@ static inline void gr_collider_velocity(const gr_collider* c, const float* x, fl
   for (a = 0; a < 3; ++a) v[a] = (x[a] - back[a]) / c->dt;
 }
 
+/* A mesh's queries are the host's alone (engine/mesh_shape.h, through the hooks engine/collider.cpp
+ * defines): on the host the functions below take each collider's mesh (null for an analytic
+ * shape) as their last argument, GR_MESH_PARAM; an OpenCL device, which holds no mesh, has no such
+ * argument and answers the analytic shapes. */
+#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+#define GR_MESH_PARAM
+#define GR_MESH_ARG(m)
+#else
+#define GR_MESH_PARAM , const void* mesh
+#define GR_MESH_ARG(m) , m
+/* MeshShape::distance (local p, normal n or null, `within`), ::crossing (local a to b, normal n)
+ * and whether the mesh is a shell (not closed) */
+float gr_mesh_distance(const void* mesh, const float* p, float* n, float within);
+float gr_mesh_crossing(const void* mesh, const float* a, const float* b, float* n);
+int gr_mesh_shell(const void* mesh);
+#endif
+
+/* the local shape's signed distance at p, exact below `within` (a mesh may give anything from
+ * `within` up to its distance beyond; the analytic shapes are exact everywhere) */
+static inline float gr_local_distance(const gr_shape* sh, const float* p, float* n,
+                                      float within GR_MESH_PARAM) {
+#if !defined(__OPENCL_VERSION__) && !defined(__OPENCL_C_VERSION__)
+  if (sh->kind == GR_SHAPE_MESH && mesh) return gr_mesh_distance(mesh, p, n, within);
+#endif
+  (void)within;
+  return gr_shape_distance(sh, p, n);
+}
+
+/* gr_collider_distance exact below `within` (world units), which lets a mesh skip its far
+ * triangles */
+static inline float gr_collider_distance_within(const gr_collider* c, const float* x, float* n,
+                                                float within GR_MESH_PARAM) {
+  GR_SHAPE_EXACT
+  float body[3], nl[3];
+  float d;
+  gr_pose_inverse(&c->pose, x, body);
+  d = gr_local_distance(&c->shape, body, n ? nl : 0, within / c->pose.s GR_MESH_ARG(mesh)) *
+      c->pose.s;
+  if (n) gr_pose_rotate(&c->pose, nl, n);
+  return d;
+}
+
+/* whether the collider did not move over the substep (the same pose, bit for bit) */
+static inline int gr_collider_still(const gr_collider* c) {
+  int k;
+  for (k = 0; k < 9; ++k)
+    if (c->pose.R[k] != c->prev.R[k]) return 0;
+  for (k = 0; k < 3; ++k)
+    if (c->pose.t[k] != c->prev.t[k]) return 0;
+  return c->pose.s == c->prev.s;
+}
+
+/* Continuous test: a sphere of `radius` moving from a (start of the substep, world) to b (its
+ * end), relative to the collider's own motion: the start against the start pose, the end against
+ * the end pose, then a sphere trace of the segment against the still local shape. Returns the
+ * fraction in [0, 1] of the first time its distance reaches `radius` (0: it starts there), or a
+ * value > 1 when it never does. */
+static inline float gr_collider_sweep(const gr_collider* c, const float* a, const float* b,
+                                      float radius GR_MESH_PARAM) {
+  GR_SHAPE_EXACT
+  float la[3], lb[3], d[3], dir[3], x[3];
+  float r, len, s, dist;
+  int k, it;
+  gr_pose_inverse(&c->prev, a, la);
+  gr_pose_inverse(&c->pose, b, lb);
+  r = radius / c->pose.s;
+  for (k = 0; k < 3; ++k) d[k] = lb[k] - la[k];
+  len = gr_shape_length(d);
+  /* a step needs the distance only up to what is left of the segment (past it the trace ends) */
+  if (gr_local_distance(&c->shape, la, 0, 2 * r + len GR_MESH_ARG(mesh)) <= r) return 0.0f;
+  if (len <= 0.0f) return 2.0f;
+  for (k = 0; k < 3; ++k) dir[k] = d[k] / len;
+  s = 0.0f;
+  for (it = 0; it < 256; ++it) {
+    for (k = 0; k < 3; ++k) x[k] = la[k] + dir[k] * s;
+    dist = gr_local_distance(&c->shape, x, 0, 2 * r + (len - s) GR_MESH_ARG(mesh)) - r;
+    if (dist <= 1e-6f * (1.0f + len)) return s / len;
+    s += dist;
+    if (s > len) break;
+  }
+  /* the end point may still be inside if tracing stopped short of it */
+  return gr_local_distance(&c->shape, lb, 0, 2 * r GR_MESH_ARG(mesh)) <= r ? 1.0f : 2.0f;
+}
+
+/* For a shell (an open mesh, which has no inside): where a point moving from a (start of the
+ * substep, world) to b (its end) passed through it, relative to its motion. Returns the fraction
+ * along the path (> 1 when it did not, and always for an analytic shape), the crossing point
+ * carried to the end pose into `at` and the shell's normal there, turned toward the side the
+ * point came from, into `side`. */
+static inline float gr_collider_shell_crossing(const gr_collider* c, const float* a, const float* b,
+                                               float* at, float* side GR_MESH_PARAM) {
+#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+  (void)c, (void)a, (void)b, (void)at, (void)side;
+  return 2.0f;
+#else
+  GR_SHAPE_EXACT
+  float la[3], lb[3], n[3], x[3];
+  float t, along;
+  int k;
+  if (!(c->shape.kind == GR_SHAPE_MESH && mesh && gr_mesh_shell(mesh))) return 2.0f;
+  gr_pose_inverse(&c->prev, a, la);
+  gr_pose_inverse(&c->pose, b, lb);
+  t = gr_mesh_crossing(mesh, la, lb, n);
+  if (!(t <= 1.0f)) return 2.0f;
+  for (k = 0; k < 3; ++k) x[k] = la[k] + (lb[k] - la[k]) * t;
+  gr_pose_apply(&c->pose, x, at);
+  /* the point came from the side its path leaves behind */
+  along = (lb[0] - la[0]) * n[0] + (lb[1] - la[1]) * n[1] + (lb[2] - la[2]) * n[2];
+  if (along > 0.0f)
+    for (k = 0; k < 3; ++k) n[k] = -n[k];
+  gr_pose_rotate(&c->pose, n, side);
+  return t;
+#endif
+}
+
 #endif

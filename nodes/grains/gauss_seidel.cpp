@@ -464,6 +464,13 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         end.v_out = c.s.keep_velocity ? nullptr : end_v_.data();
         end.force = device_force(g, &end.force_uniform);
         end.origin[0] = c.origin.x, end.origin[1] = c.origin.y, end.origin[2] = c.origin.z;
+        // the final collision test there too, on the colliders the device's planes took (every
+        // one analytic; a mesh's distance is the host's), unless the start velocity is kept
+        collided_there_ = c.s.final_collision_test && planes_on_device_ && end.v_out;
+        if (collided_there_) {
+          end.colliders = plane_colliders_.data();
+          end.collider_count = plane_colliders_.size();
+        }
         on_device.finish = &end;
       }
       cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);

@@ -97,103 +97,6 @@ inline int32_t grain_id(const GrainsData& d, size_t i) {
   return d.id ? d.id[i] : static_cast<int32_t>(i);
 }
 
-// Removes the velocity component into a collider, relative to the collider's own motion;
-// returns the normal speed removed (>= 0).
-float remove_inward_velocity(Vec3& v, const Vec3& n, const Vec3& collider_velocity) {
-  float vn = dot(v - collider_velocity, n);
-  if (!(vn < 0)) return 0.0f;
-  v -= n * vn;
-  return -vn;
-}
-
-// Collider friction of the final pass's grain-collider terms, at velocity level: the kernels'
-// law (eqs. 23-25, kernels/collider.h) with slip and overlap per substep both divided by dt, so
-// the normal speed the pass removed bounds the tangential speed relative to the collider:
-// |v_t| < static_threshold * mu * removed stops it, else it loses
-// min(1, scale_kinetic * mu * removed / |v_t|) of it. mu = friction_with_colliders x friction.
-struct SweptFriction {
-  float mu = 0, static_threshold = 1, scale_kinetic = 0.5f;
-  void apply(Vec3& v, const Vec3& n, const Vec3& collider_velocity, float removed) const {
-    if (!(mu > 0) || !(removed > 0)) return;
-    const Vec3 rel = v - collider_velocity;
-    v += to_vec(gr_friction(gr_make3(rel.x, rel.y, rel.z), gr_make3(n.x, n.y, n.z),
-                            mu * removed, static_threshold, scale_kinetic));
-  }
-};
-
-// The final collision pass for one grain moving from a (start, world) to b (end, world) with
-// velocity v, radius r: against each collider in turn,
-//  - an end point closer than r to the surface is pushed out to distance r along the normal
-//    (unless it came through the collider, below);
-//  - otherwise a path that came within r/2 of the surface somewhere between a and b (the sphere
-//    trace of ColliderState::sweep, relative to the collider's motion) tunnelled through a thin
-//    or moving collider: the grain is put where the trace first reached distance r, carried by
-//    the collider to its end pose, and pushed out to r. The r/2 test keeps grains sliding along
-//    a surface at distance ~r from counting as hits.
-//  - a path through a shell (an open mesh, which has no inside) is put back at r on the side
-//    it came from, whatever its distances say (first of the three).
-// Every way the velocity component into the collider is removed. A tunnelling grain's contact
-// was never seen by the iterations, so its collider friction was not applied either: the pass
-// applies it (`friction`) to the hit. An end point within r was in the iterations' contact
-// planes, which already had its friction. *hit receives the index of the last collider that
-// acted (unchanged when none did) and *hit_n its normal.
-// still[c]: collider c did not move over the substep (ColliderState::still).
-void final_collision(const ColliderState* colliders, const uint8_t* still, size_t collider_count,
-                     const Vec3& a, Vec3& b, Vec3& v, float r, const SweptFriction& friction,
-                     int32_t* hit, Vec3* hit_n) {
-  for (size_t c = 0; c < collider_count; ++c) {
-    const ColliderState& col = colliders[c];
-    Vec3 n;
-    // exact up to past both tests below (a mesh skips its triangles beyond)
-    float e = col.distance(b, &n, 1.505f * r + length(b - a));
-    // An end point within r is pushed out, unless the grain moved along that normal and its
-    // path crossed the collider: then it is on the far side of a thin one (the iterations
-    // pushed it out the back) and is handled as tunnelled below. Moving along the normal, a
-    // path that does not cross never comes within r/2 of the surface unless it started there.
-    const bool near = e < r;
-    // A still collider's signed distance changes by at most the distance moved, so a path that
-    // ends more than r/2 + |b - a| away never came within r/2 of it: the sweep would find no
-    // hit (checked with a 1% margin on r/2, far above the trace's tolerance and float error).
-    if (!near && still[c] && e > 0.505f * r + length(b - a)) continue;
-    // A shell has no inside, so its distance cannot tell a grain pressed through it by its
-    // neighbours (or one that started within r/2, where the sweep below reports nothing) from
-    // one on its own side: the path's crossing can. Such a grain is put back at r on the side
-    // it came from; as with a tunnelled grain, the iterations never held it there, so the
-    // pass applies the friction.
-    Vec3 at, side;
-    if (col.shell_crossing(a, b, &at, &side) <= 1.0f) {
-      b = at + side * r;
-      const float eb = col.distance(b, &n);
-      if (eb < r) b += n * (r - eb);
-      const Vec3 vc = col.velocity_at(b);
-      friction.apply(v, side, vc, remove_inward_velocity(v, side, vc));
-      *hit = static_cast<int32_t>(c);
-      *hit_n = side;
-      continue;
-    }
-    float t_half = 2.0f;  // > 1: no hit
-    if (!near || dot(b - a, n) > 0) t_half = col.sweep(a, b, 0.5f * r);
-    if (!(t_half > 0.0f && t_half <= 1.0f)) {  // 0: started deep (and left), > 1: no hit
-      if (!near) continue;
-      b += n * (r - e);
-      remove_inward_velocity(v, n, col.velocity_at(b));
-      *hit = static_cast<int32_t>(c);
-      *hit_n = n;
-      continue;
-    }
-    float t = std::min(col.sweep(a, b, r), t_half);
-    Vec3 la = col.prev_pose.inverse(a), lb = col.pose.inverse(b);
-    Vec3 h = col.pose.apply(la + (lb - la) * t);
-    float eh = col.distance(h, &n);
-    if (eh < r) h += n * (r - eh);
-    b = h;
-    const Vec3 vc = col.velocity_at(b);
-    friction.apply(v, n, vc, remove_inward_velocity(v, n, vc));
-    *hit = static_cast<int32_t>(c);
-    *hit_n = n;
-  }
-}
-
 // Union-find root with path halving.
 int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
   while (parent[a] != a) a = parent[a] = parent[parent[a]];
@@ -610,7 +513,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   candidates_on_ = false;
   p_on_device_ = planes_on_device_ = false;
   written_on_device_ = nullptr;
-  finished_there_ = false;
+  finished_there_ = collided_there_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   // the device's calls of this substep may share the arrays bind_inputs makes, which hold their
@@ -1291,12 +1194,17 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   const bool colliders_on = collider_count > 0;
   const float* p = p_.data();
   const bool final_test = s.final_collision_test && colliders_on;
-  std::vector<uint8_t> still(collider_count);
-  for (size_t c = 0; c < collider_count; ++c) still[c] = colliders[c].still() ? 1 : 0;
+  // the colliders in the shared functions' form, and their meshes (kernels/final_collision.h)
+  std::vector<gr_collider> shapes(final_test ? collider_count : 0);
+  std::vector<const void*> meshes(shapes.size());
+  for (size_t c = 0; c < shapes.size(); ++c)
+    shapes[c] = to_gr(colliders[c]), meshes[c] = colliders[c].shape.mesh.get();
   // the device's end of the substep (finished_there_), whose positions it keeps: the grains
-  // the final collision test moves are listed for contact_stats
+  // the final collision test moves here are listed for contact_stats; the device's own test
+  // (collided_there_) moved them there
   const bool there = finished_there_;
-  end_hit_.assign(there && final_test ? d.n : 0, 0);
+  const bool test_here = final_test && !collided_there_;
+  end_hit_.assign(there && test_here ? d.n : 0, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     int ii = static_cast<int>(i);
@@ -1315,11 +1223,10 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     const Vec3 v_loop = v;
     int32_t hit = -1;
     Vec3 hit_n;
-    if (final_test && inv_mass_[i] > 0.0f) {  // a fixed grain stays where it is
-      SweptFriction fr{s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f),
-                       s.static_threshold, s.scale_kinetic};
-      final_collision(colliders, still.data(), collider_count, a, b, v, radius_[i], fr, &hit,
-                      &hit_n);
+    if (test_here && inv_mass_[i] > 0.0f) {  // a fixed grain stays where it is
+      const float mu = s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f);
+      hit = final_collision(shapes.data(), meshes.data(), collider_count, a, b, v, radius_[i], mu,
+                            prm, &hit_n);
       if (there && hit >= 0) end_hit_[i] = 1;
     }
     store3(d.P, i, b);

@@ -196,10 +196,12 @@ class GrainsSolver {
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
-  // whether the device ended the last substep (velocity update, SequentialSolve::Finish), and
-  // then how many grains the host's final collision test moved after it (their positions alone
-  // go up for the overlap statistics)
+  // whether the device ended the last substep (velocity update, SequentialSolve::Finish), whether
+  // its final collision test ran there too (every collider analytic), and how many grains the
+  // host's final collision test moved after the device's end (their positions alone go up for
+  // the overlap statistics)
   bool finished_on_device() const { return finished_there_; }
+  bool collided_on_device() const { return collided_there_; }
   size_t finish_changed() const { return finished_there_ ? end_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
@@ -309,8 +311,10 @@ class GrainsSolver {
   // gauss_seidel's device solve ended the substep there (SequentialSolve::Finish): each grain's
   // written position (world) and velocity in end_P_ and end_v_ (n x 3), which write_back takes
   // for its own; the device keeps those positions, and write_back lists in end_changed_ the
-  // grains its final collision test moved, which contact_stats and the sleeping test send alone
-  bool finished_there_ = false;
+  // grains its final collision test moved, which contact_stats and the sleeping test send alone;
+  // collided_there_: the final collision test ran there too (kernels/final_collision.h), on the
+  // colliders the device's planes took (every one analytic), unless the start velocity is kept
+  bool finished_there_ = false, collided_there_ = false;
   const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
   // g's force as the device reads it at the substep's end: null (none), one row that every
   // grain reads (*uniform), else a copy of each grain's row (end_force_)

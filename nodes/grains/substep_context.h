@@ -29,4 +29,13 @@ struct GrainsSolver::SubstepContext {
   NeighborQuery q;
 };
 
+// The final collision test of one grain moving from a to b (world) with velocity v, radius r and
+// collider friction mu (friction_with_colliders x its friction), against the colliders in order
+// (kernels/final_collision.h; meshes[c]: collider c's mesh, null for an analytic shape): moves b
+// and v, and returns the last collider that acted, with its normal in *hit_n, or -1 when none did
+// (final_collision.cpp).
+int32_t final_collision(const gr_collider* colliders, const void* const* meshes, size_t count,
+                        const Vec3& a, Vec3& b, Vec3& v, float r, float mu, const gr_params& prm,
+                        Vec3* hit_n);
+
 }  // namespace grains

@@ -168,10 +168,12 @@ struct Iterations::Impl {
   Buffer stats_P, stats_part, sleep_fast, sleep_out;
   // the substep's end (gr_k_finish), which writes the grains' positions into stats_P: for how
   // many grains it last did (0: stats_P holds positions sent since, or none); the grains the
-  // host then changed go up through patch_index and patch_values (patch_positions)
-  cl_kernel finish = nullptr, scatter3 = nullptr;
+  // host then changed go up through patch_index and patch_values (patch_positions). The final
+  // collision test there (gr_k_final_collision) reads the start as it went up, kept in `start`
+  // where pre-stabilization replaces it.
+  cl_kernel finish = nullptr, scatter3 = nullptr, final_collision = nullptr;
   size_t written_n = 0;
-  Buffer force, end_v, patch_index, patch_values;
+  Buffer force, end_v, patch_index, patch_values, start;
   std::vector<float> patch_host;
   // n grains' positions P (n x 3) into stats_P: only those written_there lists go up when the
   // finish wrote n grains there (Iterations::row_overlaps), else all of them
@@ -199,7 +201,7 @@ struct Iterations::Impl {
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
-                      &force, &end_v, &patch_index, &patch_values})
+                      &force, &end_v, &patch_index, &patch_values, &start})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -208,7 +210,7 @@ struct Iterations::Impl {
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
-                        finish, scatter3})
+                        finish, scatter3, final_collision})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -7,6 +7,7 @@
 #include "collider.h"
 #include "contact.h"
 #include "distance.h"
+#include "final_collision.h"
 #include "iterate.h"
 #include "mass_shock.h"
 #include "params.h"
@@ -238,6 +239,35 @@ __kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v
     P_out[3 * i + 1] = end.y + origin_y;
     P_out[3 * i + 2] = end.z + origin_z;
     if (v_out) gr_store3(v_out, i, velocity);
+  }
+}
+
+/* The final collision test (kernels/final_collision.h) of the substep's end gr_k_finish wrote
+ * (P_out, world, and v_out), against `count` analytic colliders in order: grain i moved from its
+ * start (start, the substep's coordinates, plus the origin: the host's world start, bit for bit,
+ * solver.cpp local_origin). A fixed grain is not tested. */
+__kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
+                                   __global const gr_collider* colliders, int count,
+                                   __global const float* start, float origin_x, float origin_y,
+                                   float origin_z, __global float* P_out, __global float* v_out,
+                                   int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    const float a[3] = {start[3 * i] + origin_x, start[3 * i + 1] + origin_y,
+                        start[3 * i + 2] + origin_z};
+    const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
+    float b[3], v[3], hit_n[3];
+    int c, k;
+    if (!(g.inv_mass[i] > 0.0f)) return;
+    for (k = 0; k < 3; ++k) b[k] = P_out[3 * i + k], v[k] = v_out[3 * i + k];
+    for (c = 0; c < count; ++c) {
+      const gr_collider col = colliders[c];
+      gr_final_collision(&col, a, b, v, g.radius[i], mu, prm.static_threshold, prm.scale_kinetic,
+                         hit_n);
+    }
+    for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
   }
 }
 

@@ -550,7 +550,10 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     check(clSetKernelArg(k, kFirstOwn + 4, sizeof(int), &count), "clSetKernelArg");
     per_grain(k);
   }
-  // the pre-stabilized start is the substep's start from here on (g.P)
+  // the pre-stabilized start is the substep's start from here on (g.P); the final collision
+  // test reads the start as it went up
+  const bool final_test = w.finish && w.finish->colliders && w.finish->v_out;
+  if (w.x && final_test) m.copy_positions(m.start, m.arrays[kP], n);
   if (w.x)
     check(clEnqueueCopyBuffer(m.queue, m.stable.mem, m.arrays[kP].mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
           "clEnqueueCopyBuffer");
@@ -659,6 +662,24 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     set_buffer(k, kFirstOwn + 8, end->v_out ? &m.end_v : nullptr);
     check(clSetKernelArg(k, kFirstOwn + 9, sizeof(int), &count), "clSetKernelArg");
     per_grain(k);
+    if (final_test) {
+      // the final collision test of what it wrote: prm, grains, colliders, count, start,
+      // origin, P_out, v_out, n (the colliders the planes took, sent once a substep)
+      const int colliders = static_cast<int>(end->collider_count);
+      m.upload_once(m.plane_colliders, end->colliders, colliders * sizeof(gr_collider));
+      cl_kernel c = m.kernel(m.final_collision, "gr_k_final_collision");
+      m.set_grains(c, prm, g, inputs);
+      set_buffer(c, kFirstOwn, &m.plane_colliders);
+      check(clSetKernelArg(c, kFirstOwn + 1, sizeof(int), &colliders), "clSetKernelArg");
+      set_buffer(c, kFirstOwn + 2, w.x ? &m.start : &m.arrays[kP]);
+      for (cl_uint a = 0; a < 3; ++a)
+        check(clSetKernelArg(c, kFirstOwn + 3 + a, sizeof(float), &end->origin[a]),
+              "clSetKernelArg");
+      set_buffer(c, kFirstOwn + 6, &m.stats_P);
+      set_buffer(c, kFirstOwn + 7, &m.end_v);
+      check(clSetKernelArg(c, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+      per_grain(c);
+    }
     m.written_n = n;
     m.download(m.stats_P, end->P_out, 3 * n * f);
     m.download(m.end_v, end->v_out, 3 * n * f);

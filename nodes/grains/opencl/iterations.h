@@ -111,12 +111,17 @@ struct SequentialSolve {
   // and, when v_out is set, its velocity (3 n floats each). force: gr_grains' force as the
   // device reads it, a row a grain (3 n floats) or, with force_uniform, one row for every
   // grain; null: none. The written positions stay there for row_overlaps() (written_there).
+  // With `colliders` (collider_count analytic colliders, the array the substep's find_planes()
+  // took, and v_out) the final collision test follows there (gr_k_final_collision), from the
+  // start as it went up.
   struct Finish {
     float* P_out = nullptr;
     float* v_out = nullptr;
     const float* force = nullptr;
     bool force_uniform = false;
     float origin[3] = {0.0f, 0.0f, 0.0f};
+    const gr_collider* colliders = nullptr;
+    size_t collider_count = 0;
   };
   const Finish* finish = nullptr;
 };

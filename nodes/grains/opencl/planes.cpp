@@ -24,7 +24,8 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   m.open_neighbours();  // the scan
   cl_kernel kc = m.kernel(m.plane_count, "gr_k_plane_count");
   cl_kernel kf = m.kernel(m.plane_fill, "gr_k_plane_fill");
-  m.upload(m.plane_colliders, colliders, count * sizeof(gr_collider));
+  // (once a substep: the final collision test there takes them too)
+  m.upload_once(m.plane_colliders, colliders, count * sizeof(gr_collider));
   // the start positions, radii and inverse masses where the solve reads them (Impl::upload_once:
   // sent once a substep), the predicted positions and radii the search's copies when it took these
   // (its own must stay as it took them: row_reach)

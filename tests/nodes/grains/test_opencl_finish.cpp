@@ -1,12 +1,15 @@
 // The substep's end on the OpenCL device (gr_k_finish, opencl::SequentialSolve::Finish): the
-// velocity update there, its written positions kept there for error control's overlap
-// statistics, and the grains the host's final collision test moves sent alone.
+// velocity update there, the final collision test there, its written positions kept there for
+// error control's overlap statistics, and the grains the host's final collision test moves
+// after it (a mesh collider) sent alone.
 #include <catch2/catch.hpp>
 #include <cfloat>
 #include <cmath>
 #include <vector>
 
+#include "engine/mesh_shape.h"
 #include "tests/nodes/grains/grains_harness.h"
+#include "tests/support/meshes.h"
 
 using namespace grains;
 
@@ -97,34 +100,55 @@ TEST_CASE("use_opencl: the device ends the substep as the host does", "[opencl][
   }
 }
 
-TEST_CASE("use_opencl: grains the final collision test moves reach the device's statistics",
+TEST_CASE("use_opencl: the final collision test on the device and on the host after it",
           "[opencl][gauss_seidel]") {
   // 16 grains shot at 30 m/s at a plate thinner than their radius, each above a fixed grain
   // hanging under the plate: in one substep of 1/240 s a shot grain would move 0.125 m, through
   // the plate onto the fixed one, and the passes leave it just under the fixed grain (measured:
   // touching it). Only the final collision test's sweep sees that it came through and puts it
-  // back on top, far from the fixed grain. The device wrote the solved positions; the host's
-  // are sent for the 16 shot grains alone, and the statistics and the sleeping test's counts
-  // must be those of the positions the host holds (check_finish): no shot grain near a fixed
-  // one. Without the statistics the sleeping test sends them.
-  test::Scene sc;
-  sc.s = test::settings(24, 10, 10);
-  sc.s.contact_solver = kContactGaussSeidel;
-  sc.s.use_opencl = true;
-  sc.add_collider(test::box({0.15f, 0.0f, 0.15f}, {2.0f, 0.01f, 2.0f}));
-  for (int a = 0; a < 4; ++a)
-    for (int c = 0; c < 4; ++c) {
-      sc.add({0.1f * a, 0.06f, 0.1f * c}, 0.04f, 1.0f, {0.0f, -30.0f, 0.0f});
-      sc.add({0.1f * a, -0.1f, 0.1f * c}, 0.04f, 0.0f);  // fixed
+  // back on top, far from the fixed grain: pushed out to a radius from the plate's top face (less
+  // a few float steps at 0.045 m, 1e-8 m; 1e-6 m allowed).
+  //  - An analytic box plate: the device runs the test (gr_k_final_collision) on what it wrote,
+  //    from the same functions as the host, so check_finish finds the host's positions, bit for
+  //    bit, and nothing goes up after it.
+  //  - The same plate as a triangle mesh, whose distance is the host's alone: the host's test
+  //    follows the device's end, and the 16 grains it moved go up alone for the statistics and
+  //    the sleeping test's counts, which must be those of the positions the host holds. Without
+  //    the statistics the sleeping test sends them.
+  const float r = 0.04f, top = 0.005f;
+  for (const bool mesh : {false, true}) {
+    test::Scene sc;
+    sc.s = test::settings(24, 10, 10);
+    sc.s.contact_solver = kContactGaussSeidel;
+    sc.s.use_opencl = true;
+    const Vec3 centre{0.15f, 0.0f, 0.15f}, size{2.0f, 2 * top, 2.0f};
+    ColliderState plate = test::box(centre, size);
+    if (mesh) {
+      std::string problem;
+      plate.shape.kind = ShapeKind::Mesh;
+      plate.shape.mesh = MeshShape::build(test::box_mesh({0, 0, 0}, size), &problem);
+      REQUIRE(plate.shape.mesh);
     }
-  // with the statistics, and without them (the sleeping test then sends the moved grains)
-  for (const bool with_stats : {true, false}) {
-    INFO((with_stats ? "with" : "without") << " the overlap statistics");
-    sc.with_stats = with_stats;
-    bool there = false;
-    const size_t moved = check_finish(sc, &there);
-    INFO(moved << " grains moved by the final collision test");
-    CHECK(moved == 16);
-    CHECK(there);
+    sc.add_collider(plate);
+    for (int a = 0; a < 4; ++a)
+      for (int c = 0; c < 4; ++c) {
+        sc.add({0.1f * a, 0.06f, 0.1f * c}, r, 1.0f, {0.0f, -30.0f, 0.0f});
+        sc.add({0.1f * a, -0.1f, 0.1f * c}, r, 0.0f);  // fixed
+      }
+    for (const bool with_stats : {true, false}) {
+      INFO((mesh ? "a mesh plate, " : "a box plate, ")
+           << (with_stats ? "with" : "without") << " the overlap statistics");
+      sc.with_stats = with_stats;
+      bool there = false;
+      test::Scene end = sc;
+      end.s.host_finish = false;
+      end.substep();
+      CHECK(end.solver.collided_on_device() == !mesh);
+      for (size_t i = 0; i < sc.size(); i += 2) CHECK(end.P[3 * i + 1] > top + r - 1e-6f);
+      const size_t moved = check_finish(sc, &there);
+      INFO(moved << " grains moved by the host's final collision test after the device's end");
+      CHECK(moved == (mesh ? 16u : 0u));
+      CHECK(there);
+    }
   }
 }

@@ -75,6 +75,10 @@ struct GrainsSettings {
   // device could (SequentialSolve::Finish), bringing the solved positions back (the tests
   // compare the two)
   bool host_finish = false;
+  // use_opencl: every substep's start positions and velocities go up whole, even where the
+  // device makes them from the last substep's end (GrainsSolver::carry_start; the tests compare
+  // the two)
+  bool resend_start = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -201,6 +205,10 @@ class GrainsSolver {
   // host's final collision test moved after the device's end (their positions alone go up for
   // the overlap statistics)
   bool finished_on_device() const { return finished_there_; }
+  // whether the last substep's start was made on the device from the end before (carry_start),
+  // and how many grains went up for it
+  bool carried_start() const { return carried_; }
+  size_t carried_changed() const { return carried_ ? carry_changed_.size() : 0; }
   bool collided_on_device() const { return collided_there_; }
   size_t finish_changed() const { return finished_there_ ? end_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
@@ -315,6 +323,13 @@ class GrainsSolver {
   // collided_there_: the final collision test ran there too (kernels/final_collision.h), on the
   // colliders the device's planes took (every one analytic), unless the start velocity is kept
   bool finished_there_ = false, collided_there_ = false;
+  // use_opencl: the substep's start positions (P0_) and velocities (d.v) made on the device from
+  // what the last end there wrote (end_P_ and end_v_ hold the same floats), but for the grains
+  // whose host values differ (carry_changed_), which go up alone; carried_: it was
+  void carry_start(const SubstepContext& c);
+  bool carried_ = false;
+  std::vector<uint8_t> carry_differs_;
+  std::vector<gr_uint> carry_changed_;
   const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
   // g's force as the device reads it at the substep's end: null (none), one row that every
   // grain reads (*uniform), else a copy of each grain's row (end_force_)

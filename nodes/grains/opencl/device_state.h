@@ -174,7 +174,17 @@ struct Iterations::Impl {
   cl_kernel finish = nullptr, scatter3 = nullptr, final_collision = nullptr;
   size_t written_n = 0;
   Buffer force, end_v, patch_index, patch_values, start;
-  std::vector<float> patch_host;
+  // what the last end there wrote, kept for the next substep's start (Iterations::carry_start):
+  // the world positions and, with carry_v_n, the velocities of carry_n grains (0: none)
+  cl_kernel carry = nullptr;
+  Buffer carry_P, carry_v;
+  size_t carry_n = 0, carry_v_n = 0;
+  std::vector<float> patch_host[2];  // the values patch() sends (held: a write reads them late)
+  // the grains `index` lists of `to` (3 floats a grain) take their values in host array P (n x
+  // 3), sent alone through patch_index (already there with index_there) and patch_values,
+  // staged in patch_host[slot]
+  void patch(Buffer& to, const float* P, const std::vector<gr_uint>& index, bool index_there,
+             int slot);
   // n grains' positions P (n x 3) into stats_P: only those written_there lists go up when the
   // finish wrote n grains there (Iterations::row_overlaps), else all of them
   void stats_positions(const float* P, size_t n, const std::vector<gr_uint>* written_there);
@@ -201,7 +211,8 @@ struct Iterations::Impl {
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
-                      &force, &end_v, &patch_index, &patch_values, &start})
+                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P,
+                      &carry_v})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -210,7 +221,7 @@ struct Iterations::Impl {
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
-                        finish, scatter3, final_collision})
+                        finish, scatter3, final_collision, carry})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -117,6 +117,33 @@ void Iterations::begin_substep() {
   impl_->p_taken = nullptr;
 }
 
+bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
+                             const std::vector<gr_uint>& changed) {
+  Impl& m = *impl_;
+  if (n == 0 || m.carry_n != n || (v && m.carry_v_n != n)) return false;
+  const size_t f = sizeof(float);
+  Buffer& start = m.arrays[kP];
+  // one float past the last grain, as an upload of positions has (the contact loop's block loads)
+  start.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+  if (v) m.velocity.reserve(m.ctx, 3 * n * f, m.largest);
+  // end_P, origin, P, end_v, v, n
+  cl_kernel k = m.kernel(m.carry, "gr_k_carry");
+  const int count = static_cast<int>(n);
+  arg(k, 0, m.carry_P), arg(k, 1, origin[0]), arg(k, 2, origin[1]), arg(k, 3, origin[2]);
+  arg(k, 4, start), arg(k, 7, count);
+  set_buffer(k, 5, v ? &m.carry_v : nullptr);
+  set_buffer(k, 6, v ? &m.velocity : nullptr);
+  m.launch(k, n);
+  const float zero = 0.0f;
+  check(clEnqueueFillBuffer(m.queue, start.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
+        "clEnqueueFillBuffer");
+  m.patch(start, P, changed, false, 0);
+  if (v) m.patch(m.velocity, v, changed, true, 1);
+  m.copied_once(start, P, 3 * n * f);
+  if (v) m.copied_once(m.velocity, v, 3 * n * f);
+  return true;
+}
+
 Traffic Iterations::traffic() const {
   return impl_->traffic;
 }
@@ -539,7 +566,8 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
   // the velocity pre-stabilization takes back: v, p, carried, inv_last, n
   const bool velocities = w.take_back || (contacts && loaded);
-  if (velocities) m.upload(m.velocity, w.v ? w.v : g.v, 3 * n * f);
+  // (carry_start may have made them there)
+  if (velocities) m.upload_once(m.velocity, w.v ? w.v : g.v, 3 * n * f);
   if (w.x && w.take_back) {
     cl_kernel k = m.kernel(m.take_back, "gr_k_warm_take_back");
     m.set_grains(k, prm, g, inputs);
@@ -549,6 +577,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     check(clSetKernelArg(k, kFirstOwn + 3, sizeof(float), &w.inv_last), "clSetKernelArg");
     check(clSetKernelArg(k, kFirstOwn + 4, sizeof(int), &count), "clSetKernelArg");
     per_grain(k);
+    m.forget(m.velocity);  // no longer the host's
   }
   // the pre-stabilized start is the substep's start from here on (g.P); the final collision
   // test reads the start as it went up
@@ -645,7 +674,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   if (const SequentialSolve::Finish* end = w.finish) {
     // the substep's end here: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n
     // (the start velocities as pre-stabilization left them, or as they are)
-    if (!velocities) m.upload(m.velocity, g.v, 3 * n * f);
+    if (!velocities) m.upload_once(m.velocity, g.v, 3 * n * f);
     const int uniform = end->force_uniform ? 1 : 0;
     m.upload(m.force, end->force, (uniform ? 3 : 3 * n) * f);
     m.stats_P.reserve(m.ctx, 3 * n * f, m.largest);
@@ -681,6 +710,19 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       per_grain(c);
     }
     m.written_n = n;
+    // what it wrote, kept for the next substep's start (carry_start)
+    m.carry_P.reserve(m.ctx, 3 * n * f, m.largest);
+    check(clEnqueueCopyBuffer(m.queue, m.stats_P.mem, m.carry_P.mem, 0, 0, 3 * n * f, 0, nullptr,
+                              nullptr),
+          "clEnqueueCopyBuffer");
+    m.carry_n = n;
+    m.carry_v_n = end->v_out ? n : 0;
+    if (end->v_out) {
+      m.carry_v.reserve(m.ctx, 3 * n * f, m.largest);
+      check(clEnqueueCopyBuffer(m.queue, m.end_v.mem, m.carry_v.mem, 0, 0, 3 * n * f, 0, nullptr,
+                                nullptr),
+            "clEnqueueCopyBuffer");
+    }
     m.download(m.stats_P, end->P_out, 3 * n * f);
     m.download(m.end_v, end->v_out, 3 * n * f);
   } else {
@@ -708,19 +750,22 @@ void Iterations::Impl::stats_positions(const float* P, size_t n,
     written_n = 0;
     return;
   }
-  const std::vector<gr_uint>& changed = *written_there;
-  const size_t count = changed.size();
+  patch(stats_P, P, *written_there, false, 0);
+}
+
+void Iterations::Impl::patch(Buffer& to, const float* P, const std::vector<gr_uint>& index,
+                             bool index_there, int slot) {
+  const size_t count = index.size();
   if (count == 0) return;
-  // (held here: the upload may still read them after this returns)
-  std::vector<float>& values = patch_host;
+  std::vector<float>& values = patch_host[slot];
   values.resize(3 * count);
   for (size_t k = 0; k < count; ++k)
-    std::copy_n(P + 3 * size_t(changed[k]), 3, values.begin() + 3 * k);
-  upload(patch_index, changed.data(), count * sizeof(gr_uint));
+    std::copy_n(P + 3 * size_t(index[k]), 3, values.begin() + 3 * k);
+  if (!index_there) upload(patch_index, index.data(), count * sizeof(gr_uint));
   upload(patch_values, values.data(), values.size() * sizeof(float));
   cl_kernel k = kernel(scatter3, "gr_k_scatter3");
   const int items = static_cast<int>(count);
-  arg(k, 0, stats_P), arg(k, 1, patch_index), arg(k, 2, patch_values), arg(k, 3, items);
+  arg(k, 0, to), arg(k, 1, patch_index), arg(k, 2, patch_values), arg(k, 3, items);
   launch(k, count);
 }
 

@@ -260,6 +260,15 @@ class Iterations {
   // substep), and the predicted positions the substep's search of rows or planes took
   // (SequentialSolve::p_there).
   void begin_substep();
+  // The substep's start positions (P: host, the substep's coordinates, n x 3) and velocities (v,
+  // or null) made there from what the last end there wrote (SequentialSolve::Finish): its world
+  // positions less `origin` (as the host subtracts it) and its velocities, but for the grains
+  // `changed` lists, whose host values differ from those and go up alone (16 bytes a grain for
+  // the positions, 12 more for the velocities). From then on this substep's calls take P and v
+  // as sent. False, with nothing done, when the last end there was not of n grains (or wrote no
+  // velocities and v is asked for).
+  bool carry_start(const float* P, const float* v, size_t n, const float origin[3],
+                   const std::vector<gr_uint>& changed);
   // what has crossed between the host and the device since it was opened
   Traffic traffic() const;
 

@@ -161,18 +161,20 @@ TEST_CASE("use_opencl: the substep's start made on the device from the last end"
   // wrote there, with only the grains whose host floats differ sent. Between substeps something
   // else changes some grains, as another node or the sleeping test would: every 7th substep 13
   // grains' velocities, every 11th 9 grains' positions (1 mm up); from the 30th substep on the
-  // grains lie 96 m from the world's origin (the start's origin then changes: the device
-  // subtracts it as the host does). The device's start is then the host's floats, so the two
-  // runs must end with the same positions and velocities, bit for bit; the start is made there
-  // on every substep after the first but the one after the move (every grain differs), and
-  // only the grains changed since the last end go up (none between unchanged substeps).
+  // grains lie 96 m from the world's origin along x and z and fall from 64 m up (the start's
+  // origin then changes along every axis: the device subtracts it as the host does). The
+  // device's start is then the host's floats, so the two runs must end with the same positions
+  // and velocities, bit for bit; the start is made there on every substep after the first but
+  // the one after the move (every grain differs), and only the grains changed since the last
+  // end go up (none between unchanged substeps).
   test::Scene sent = test::layered_block(true), made = sent;
   sent.s.resend_start = true;
   for (int k = 0; k < 60; ++k) {
     size_t changed = 0;
     if (k == 30) {
       for (test::Scene* sc : {&sent, &made})
-        for (size_t i = 0; i < sc->size(); ++i) sc->P[3 * i] += 96.0f, sc->P[3 * i + 2] += 96.0f;
+        for (size_t i = 0; i < sc->size(); ++i)
+          sc->P[3 * i] += 96.0f, sc->P[3 * i + 1] += 64.0f, sc->P[3 * i + 2] += 96.0f;
       changed = sent.size();
     } else {
       const bool kick = k % 7 == 3, lift = k % 11 == 5;

@@ -1230,17 +1230,16 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   const long ln = static_cast<long>(d.n);
   const bool colliders_on = collider_count > 0;
   const float* p = p_.data();
-  const bool final_test = s.final_collision_test && colliders_on;
-  // the colliders in the shared functions' form, and their meshes (kernels/final_collision.h)
-  std::vector<gr_collider> shapes(final_test ? collider_count : 0);
-  std::vector<const void*> meshes(shapes.size());
-  for (size_t c = 0; c < shapes.size(); ++c)
-    shapes[c] = to_gr(colliders[c]), meshes[c] = colliders[c].shape.mesh.get();
   // the device's end of the substep (finished_there_), whose positions it keeps: the grains
   // the final collision test moves here are listed for contact_stats; the device's own test
   // (collided_there_) moved them there
   const bool there = finished_there_;
-  const bool test_here = final_test && !collided_there_;
+  const bool test_here = s.final_collision_test && colliders_on && !collided_there_;
+  // the colliders in the shared functions' form, and their meshes (kernels/final_collision.h)
+  std::vector<gr_collider> shapes(test_here ? collider_count : 0);
+  std::vector<const void*> meshes(shapes.size());
+  for (size_t c = 0; c < shapes.size(); ++c)
+    shapes[c] = to_gr(colliders[c]), meshes[c] = colliders[c].shape.mesh.get();
   end_hit_.assign(there && test_here ? d.n : 0, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {

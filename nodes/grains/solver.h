@@ -205,12 +205,12 @@ class GrainsSolver {
   // host's final collision test moved after the device's end (their positions alone go up for
   // the overlap statistics)
   bool finished_on_device() const { return finished_there_; }
+  bool collided_on_device() const { return collided_there_; }
+  size_t finish_changed() const { return finished_there_ ? end_changed_.size() : 0; }
   // whether the last substep's start was made on the device from the end before (carry_start),
   // and how many grains went up for it
   bool carried_start() const { return carried_; }
   size_t carried_changed() const { return carried_ ? carry_changed_.size() : 0; }
-  bool collided_on_device() const { return collided_there_; }
-  size_t finish_changed() const { return finished_there_ ? end_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
   // until the next substep

@@ -175,9 +175,10 @@ struct Iterations::Impl {
   size_t written_n = 0;
   Buffer force, end_v, patch_index, patch_values, start;
   // what the last end there wrote, kept for the next substep's start (Iterations::carry_start):
-  // the world positions and, with carry_v_n, the velocities of carry_n grains (0: none)
+  // the world positions of carry_n grains (0: none) and, for carry_v_n grains, the velocities
+  // (in end_v, which only the end writes)
   cl_kernel carry = nullptr;
-  Buffer carry_P, carry_v;
+  Buffer carry_P;
   size_t carry_n = 0, carry_v_n = 0;
   std::vector<float> patch_host[2];  // the values patch() sends (held: a write reads them late)
   // the grains `index` lists of `to` (3 floats a grain) take their values in host array P (n x
@@ -211,8 +212,7 @@ struct Iterations::Impl {
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
-                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P,
-                      &carry_v})
+                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,

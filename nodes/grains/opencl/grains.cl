@@ -273,12 +273,14 @@ __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
 
 /* The substep's start from the last substep's end kept here (Iterations::carry_start): the
  * world positions end_P less the origin into P, as the host takes them (solver.cpp,
- * bind_inputs: the same subtraction), and the velocities end_v into v (null: not carried). */
+ * bind_inputs: the same subtraction), and a zero past the last grain, as an upload of positions
+ * has (the contact loop's block loads); the velocities end_v into v (null: not carried). */
 __kernel void gr_k_carry(__global const float* end_P, float origin_x, float origin_y,
                          float origin_z, __global float* P, __global const float* end_v,
                          __global float* v, int n) {
   const int i = (int)get_global_id(0);
   if (i >= n) return;
+  if (i == 0) P[3 * n] = 0.0f;
   P[3 * i] = end_P[3 * i] - origin_x;
   P[3 * i + 1] = end_P[3 * i + 1] - origin_y;
   P[3 * i + 2] = end_P[3 * i + 2] - origin_z;

@@ -123,20 +123,16 @@ bool Iterations::carry_start(const float* P, const float* v, size_t n, const flo
   if (n == 0 || m.carry_n != n || (v && m.carry_v_n != n)) return false;
   const size_t f = sizeof(float);
   Buffer& start = m.arrays[kP];
-  // one float past the last grain, as an upload of positions has (the contact loop's block loads)
-  start.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+  start.reserve(m.ctx, (3 * n + 1) * f, m.largest);  // and the zero past the last grain
   if (v) m.velocity.reserve(m.ctx, 3 * n * f, m.largest);
   // end_P, origin, P, end_v, v, n
   cl_kernel k = m.kernel(m.carry, "gr_k_carry");
   const int count = static_cast<int>(n);
   arg(k, 0, m.carry_P), arg(k, 1, origin[0]), arg(k, 2, origin[1]), arg(k, 3, origin[2]);
   arg(k, 4, start), arg(k, 7, count);
-  set_buffer(k, 5, v ? &m.carry_v : nullptr);
+  set_buffer(k, 5, v ? &m.end_v : nullptr);
   set_buffer(k, 6, v ? &m.velocity : nullptr);
   m.launch(k, n);
-  const float zero = 0.0f;
-  check(clEnqueueFillBuffer(m.queue, start.mem, &zero, f, 3 * n * f, f, 0, nullptr, nullptr),
-        "clEnqueueFillBuffer");
   m.patch(start, P, changed, false, 0);
   if (v) m.patch(m.velocity, v, changed, true, 1);
   m.copied_once(start, P, 3 * n * f);
@@ -710,19 +706,15 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
       per_grain(c);
     }
     m.written_n = n;
-    // what it wrote, kept for the next substep's start (carry_start)
+    // what it wrote, kept for the next substep's start (carry_start): the positions copied
+    // (the statistics patch stats_P with the host's), the velocities where they are (nothing
+    // else writes end_v)
     m.carry_P.reserve(m.ctx, 3 * n * f, m.largest);
     check(clEnqueueCopyBuffer(m.queue, m.stats_P.mem, m.carry_P.mem, 0, 0, 3 * n * f, 0, nullptr,
                               nullptr),
           "clEnqueueCopyBuffer");
     m.carry_n = n;
     m.carry_v_n = end->v_out ? n : 0;
-    if (end->v_out) {
-      m.carry_v.reserve(m.ctx, 3 * n * f, m.largest);
-      check(clEnqueueCopyBuffer(m.queue, m.end_v.mem, m.carry_v.mem, 0, 0, 3 * n * f, 0, nullptr,
-                                nullptr),
-            "clEnqueueCopyBuffer");
-    }
     m.download(m.stats_P, end->P_out, 3 * n * f);
     m.download(m.end_v, end->v_out, 3 * n * f);
   } else {

@@ -112,11 +112,10 @@ Vec3 Pose::inverse(const Vec3& world) const {
 }
 
 float shape_distance(const Shape& sh, const Vec3& p, Vec3* normal, float within) {
-  if (sh.kind == ShapeKind::Mesh && sh.mesh) return sh.mesh->distance(p, normal, within);
   const gr_shape g = to_gr(sh);
   const float at[3] = {p.x, p.y, p.z};
   float n[3];
-  const float d = gr_shape_distance(&g, at, normal ? n : nullptr);
+  const float d = gr_local_distance(&g, at, normal ? n : nullptr, within, sh.mesh.get());
   if (normal) *normal = vec(n);
   return d;
 }

@@ -511,7 +511,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
-  p_on_device_ = planes_on_device_ = false;
+  p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = false;
   written_on_device_ = nullptr;
   finished_there_ = collided_there_ = carried_ = false;
   stabilize_passes_ = 0;
@@ -739,7 +739,11 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
   carried_ = device_.device->carry_start(P0_, v, n, origin, carry_changed_);
 }
 
-// step 1: each grain's predicted position p_ (gr_predict)
+// step 1: each grain's predicted position p_ (gr_predict). With use_opencl and gauss_seidel the
+// device makes the same floats (gr_fmadd: fused on both) from the start, velocities, masses and
+// force it holds, which then need not go up: the search of rows or planes and the solve take
+// them there; the host's stay for what it reads of them (the Verlet test that keeps the rows,
+// the planes it finds itself: a mesh collider's).
 void GrainsSolver::predict(SubstepContext& c) {
   const size_t n = n_;
   const long ln = static_cast<long>(n);
@@ -748,6 +752,12 @@ void GrainsSolver::predict(SubstepContext& c) {
   p_next_.resize(3 * n + 1);
 #pragma omp parallel for schedule(static) num_threads(c.threads)
   for (long i = 0; i < ln; ++i) gr_predict(&c.g, &c.prm, p_.data(), static_cast<int>(i));
+  if (c.s.use_opencl && !c.s.host_predict && c.s.contact_solver == kContactGaussSeidel) {
+    bool uniform = false;
+    const float* force = device_force(c.g, &uniform);
+    open_device().predict(c.g, c.prm, n, force, uniform);
+    predicted_there_ = p_on_device_ = true;
+  }
 }
 
 // Which friction passes run, and the sums the iterations keep for them and the impact data
@@ -853,14 +863,15 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
     // use_opencl: the rows found on the device (the same rows; the host's search where the
     // device cannot, opencl/iterations.h)
-    const bool on_device =
-        c.s.use_opencl &&
-        open_device().find_neighbours(p_.data(), c.search_radius, n, c.q, neighbors_, stay);
+    const bool on_device = c.s.use_opencl && open_device().find_neighbours(
+                                                 p_.data(), c.search_radius, n, c.q, neighbors_,
+                                                 stay, first && predicted_there_);
     if (!on_device)
       search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
     rows_on_device_ = on_device;
-    p_on_device_ = first && on_device;
+    searched_there_ = first && on_device;
+    p_on_device_ = first && (on_device || predicted_there_);
     rows_true_radius_ = c.search_radius == radius_;
     device_.rows_stale = on_device && stay;
     rows_left_ += device_.rows_stale;
@@ -932,7 +943,7 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   }
   DevicePlanes device;
   device.p_there = first && p_on_device_;
-  device.radius_there = device.p_there && rows_true_radius_;
+  device.radius_there = first && searched_there_ && rows_true_radius_;
   device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
   find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
               c.threads, c.s.use_opencl ? &device : nullptr);

@@ -79,6 +79,9 @@ struct GrainsSettings {
   // device makes them from the last substep's end (GrainsSolver::carry_start; the tests compare
   // the two)
   bool resend_start = false;
+  // use_opencl with gauss_seidel: the host's predicted positions go up, even where the device
+  // makes the same floats (GrainsSolver::predict; the tests compare the two)
+  bool host_predict = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -210,6 +213,8 @@ class GrainsSolver {
   // whether the last substep's start was made on the device from the end before (carry_start),
   // and how many grains went up for it
   bool carried_start() const { return carried_; }
+  // whether the device made the last substep's predicted positions (predict)
+  bool predicted_on_device() const { return predicted_there_; }
   size_t carried_changed() const { return carried_ ? carry_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
@@ -312,8 +317,10 @@ class GrainsSolver {
   // substeps with them), which the device's contact list build then reads where they are
   bool rows_on_device_ = false;
   // this substep's predicted positions p_ went to the device with its search of rows or
-  // planes, unchanged since (the solve then copies them there rather than sending them again)
-  bool p_on_device_ = false;
+  // planes, or the device made them (predicted_there_), unchanged since (the search, the planes
+  // and the solve then copy them there rather than sending them again); searched_there_: the
+  // device's search of rows took them this substep (and the radii with them)
+  bool p_on_device_ = false, predicted_there_ = false, searched_there_ = false;
   // the written positions (d.P) error control's statistics sent to the device this substep
   mutable const float* written_on_device_ = nullptr;
   // gauss_seidel's device solve ended the substep there (SequentialSolve::Finish): each grain's

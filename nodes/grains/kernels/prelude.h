@@ -104,6 +104,18 @@ GR_INLINE void gr_load_block(const GR_GLOBAL float* a, const gr_uint* j, float* 
 GR_INLINE float gr_length(gr_float3 a) { return gr_sqrt(gr_dot(a, a)); }
 /* a + s * b */
 GR_INLINE gr_float3 gr_madd(gr_float3 a, gr_float3 b, float s) { return gr_add(a, gr_scale(b, s)); }
+/* a + s * b with one rounding a component (fused), on every backend: where the host and a
+ * device must make the same floats (the prediction, which both make), whether or not a compiler
+ * would fuse the multiply and the add of gr_madd */
+#ifdef GR_OPENCL
+GR_INLINE gr_float3 gr_fmadd(gr_float3 a, gr_float3 b, float s) {
+  return fma(b, (float3)(s), a);
+}
+#else
+GR_INLINE gr_float3 gr_fmadd(gr_float3 a, gr_float3 b, float s) {
+  return gr_make3(fmaf(b.x, s, a.x), fmaf(b.y, s, a.y), fmaf(b.z, s, a.z));
+}
+#endif
 /* a point attribute that scales a parameter: missing (null) = 1 */
 GR_INLINE float gr_attr(const GR_GLOBAL float* a, int i) { return a ? a[i] : 1.0f; }
 

@@ -13,14 +13,14 @@ GR_INLINE gr_float3 gr_predicted_velocity(const gr_grains* g, const gr_params* p
   gr_float3 v = gr_load3(g->v, i);
   if (g->force && g->mass[i] > 0.0f) {
     const int f = g->force_uniform ? 0 : (g->force_index ? (int)g->force_index[i] : i);
-    v = gr_madd(v, gr_load3(g->force, f), prm->dt / g->mass[i]);
+    v = gr_fmadd(v, gr_load3(g->force, f), prm->dt / g->mass[i]);
   }
   return v;
 }
 
 /* step 1: the predicted position of grain i */
 GR_INLINE void gr_predict(const gr_grains* g, const gr_params* prm, GR_GLOBAL float* p, int i) {
-  gr_store3(p, i, gr_madd(gr_load3(g->P, i), gr_predicted_velocity(g, prm, i), prm->dt));
+  gr_store3(p, i, gr_fmadd(gr_load3(g->P, i), gr_predicted_velocity(g, prm, i), prm->dt));
 }
 
 /* step 4: grain i's end-of-substep position (*P_out) and velocity (*v_out) from the solved p */

@@ -180,6 +180,10 @@ struct Iterations::Impl {
   cl_kernel carry = nullptr;
   Buffer carry_P;
   size_t carry_n = 0, carry_v_n = 0;
+  // the substep's predicted positions made there (Iterations::predict, gr_k_predict), which the
+  // search of rows or planes and the solve take
+  cl_kernel predict = nullptr;
+  Buffer predicted;
   std::vector<float> patch_host[2];  // the values patch() sends (held: a write reads them late)
   // the grains `index` lists of `to` (3 floats a grain) take their values in host array P (n x
   // 3), sent alone through patch_index (already there with index_there) and patch_values,
@@ -212,7 +216,8 @@ struct Iterations::Impl {
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
-                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P})
+                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P,
+                      &predicted})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -221,7 +226,7 @@ struct Iterations::Impl {
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
-                        finish, scatter3, final_collision, carry})
+                        finish, scatter3, final_collision, carry, predict})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -262,9 +267,9 @@ struct Iterations::Impl {
     forget(b);
     once.push_back({&b, b.mem, host, bytes});
   }
-  // the substep's predicted positions where the last search of rows or planes took them (nb_P
-  // or plane_p), for p_taken_n grains
-  const Buffer* p_taken = nullptr;
+  // the substep's predicted positions where the last search of rows or planes took them or the
+  // prediction made them (nb_P, plane_p or predicted), for p_taken_n grains
+  Buffer* p_taken = nullptr;
   size_t p_taken_n = 0;
 
   // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset

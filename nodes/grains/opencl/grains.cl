@@ -218,6 +218,25 @@ __kernel void gr_k_warm_take_back(gr_params prm, GR_GRAINS_ARGS, __global float*
   }
 }
 
+/* The substep's prediction (kernels/velocity.h, gr_predict): grain i's predicted position into
+ * p, and a zero past the last grain, as an upload of positions has (the contact loop's block
+ * loads); v and force as gr_k_finish reads them. The host's floats, bit for bit: gr_fmadd fuses
+ * on both. */
+__kernel void gr_k_predict(gr_params prm, GR_GRAINS_ARGS, __global const float* v,
+                           __global const float* force, int force_uniform, __global float* p,
+                           int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  if (i == 0) p[3 * n] = 0.0f;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    g.v = v;
+    g.force = force;
+    g.force_uniform = force_uniform;
+    gr_predict(&g, &prm, p, i);
+  }
+}
+
 /* The substep's end (kernels/velocity.h, gr_update_velocity): grain i's position written back
  * in world coordinates (the substep's plus the origin, as the host adds them) into P_out and its
  * velocity into v_out (null: the host keeps its own). v: the start velocity as pre-stabilization

@@ -140,6 +140,37 @@ bool Iterations::carry_start(const float* P, const float* v, size_t n, const flo
   return true;
 }
 
+void Iterations::predict(const gr_grains& g, const gr_params& prm, size_t n, const float* force,
+                         bool force_uniform) {
+  Impl& m = *impl_;
+  if (n == 0) return;
+  const size_t f = sizeof(float);
+  IterationSizes size;
+  size.n = n;
+  HostArray inputs[kArrays];
+  grain_arrays(g, size, inputs);
+  // what the solve and the end read too, sent once a substep (carry_start may have made the
+  // start and the velocities here)
+  m.upload_once(m.arrays[kP], g.P, 3 * n * f, (3 * n + 1) * f);
+  m.upload_once(m.arrays[kMass], g.mass, n * f);
+  m.upload_once(m.velocity, g.v, 3 * n * f);
+  const int uniform = force_uniform ? 1 : 0;
+  m.upload_once(m.force, force, (uniform ? 3 : 3 * n) * f);
+  m.predicted.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+  // prm, grains, v, force, force_uniform, p, n
+  cl_kernel k = m.kernel(m.predict, "gr_k_predict");
+  m.set_grains(k, prm, g, inputs);
+  const int count = static_cast<int>(n);
+  set_buffer(k, kFirstOwn, &m.velocity);
+  set_buffer(k, kFirstOwn + 1, force ? &m.force : nullptr);
+  arg(k, kFirstOwn + 2, uniform);
+  set_buffer(k, kFirstOwn + 3, &m.predicted);
+  arg(k, kFirstOwn + 4, count);
+  m.launch(k, n);
+  m.p_taken = &m.predicted;
+  m.p_taken_n = n;
+}
+
 Traffic Iterations::traffic() const {
   return impl_->traffic;
 }
@@ -672,7 +703,7 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     // (the start velocities as pre-stabilization left them, or as they are)
     if (!velocities) m.upload_once(m.velocity, g.v, 3 * n * f);
     const int uniform = end->force_uniform ? 1 : 0;
-    m.upload(m.force, end->force, (uniform ? 3 : 3 * n) * f);
+    m.upload_once(m.force, end->force, (uniform ? 3 : 3 * n) * f);
     m.stats_P.reserve(m.ctx, 3 * n * f, m.largest);
     if (end->v_out) m.end_v.reserve(m.ctx, 3 * n * f, m.largest);
     cl_kernel k = m.kernel(m.finish, "gr_k_finish");

@@ -162,9 +162,9 @@ class Iterations {
   // a buffer would exceed the device's largest.
   // indices_there: only out's offsets come back; its indices stay on the device (out.indices
   // left empty) until fetch_rows() brings them, and row_overlaps() and row_reach() read them
-  // there.
+  // there. p_there: P is the positions predict() made there, which are copied, not sent.
   bool find_neighbours(const float* P, const float* radius, size_t n, const NeighborQuery& q,
-                       NeighborList& out, bool indices_there = false);
+                       NeighborList& out, bool indices_there = false, bool p_there = false);
   // the indices of the rows the last find_neighbours() gave into out.indices (out.offsets as it
   // gave them)
   void fetch_rows(NeighborList& out);
@@ -240,9 +240,10 @@ class Iterations {
   // The collider planes (kernels/planes.h) of n grains among `count` analytic colliders (no
   // mesh), found on the device: GrainsSolver::find_planes' rows, bit for bit. P and p (n x 3,
   // the substep's coordinates, world = those + origin), radius and inv_mass (n); p_there: p is
-  // the positions the device's last find_neighbours() took, radius_there: radius is its radii
-  // (neither then goes up). Out: each grain's first entry and the end (n + 1), the entries (9
-  // floats each: surface point, normal, the collider's velocity there) and their colliders.
+  // the positions the device's last find_neighbours() or predict() took or made, radius_there:
+  // radius is the search's radii (neither then goes up). Out: each grain's first entry and the
+  // end (n + 1), the entries (9 floats each: surface point, normal, the collider's velocity
+  // there) and their colliders.
   // entries_stay: *plane is sized but not written; the entries stay on the device until
   // fetch_planes() brings them. The device keeps all three for the calls that follow
   // (IterationSizes::planes_there).
@@ -260,6 +261,13 @@ class Iterations {
   // substep), and the predicted positions the substep's search of rows or planes took
   // (SequentialSolve::p_there).
   void begin_substep();
+  // The substep's predicted positions (gr_predict) of n grains made there, from g's start
+  // positions (g.P, the substep's coordinates), velocities and masses and `force` (a row a grain,
+  // or with force_uniform one row for every grain; null: none), sent once a substep (as
+  // carry_start may have made them there): the host's floats, bit for bit, which the search of
+  // rows or planes and the solve then take there (their p_there) instead of the host's.
+  void predict(const gr_grains& g, const gr_params& prm, size_t n, const float* force,
+               bool force_uniform);
   // The substep's start positions (P: host, the substep's coordinates, n x 3) and velocities (v,
   // or null) made there from what the last end there wrote (SequentialSolve::Finish): its world
   // positions less `origin` (as the host subtracts it) and its velocities, but for the grains

@@ -106,7 +106,8 @@ void Iterations::Impl::scan(Buffer& x, size_t n) {
 }
 
 bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
-                                 const NeighborQuery& q, NeighborList& out, bool indices_there) {
+                                 const NeighborQuery& q, NeighborList& out, bool indices_there,
+                                 bool p_there) {
   Impl& m = *impl_;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   m.rows_found = false;
@@ -123,7 +124,10 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   // refuse the substep; the entries' keys are checked once their number is known
   if (4 * n * f > m.largest) return false;
   const int count = static_cast<int>(n);
-  m.upload(m.nb_P, P, 3 * n * f);
+  if (p_there && m.p_taken == &m.predicted && m.p_taken_n == n)
+    m.copy_positions(m.nb_P, m.predicted, n);
+  else
+    m.upload(m.nb_P, P, 3 * n * f);
   m.upload(m.nb_radius, radius, n * f);
   m.p_taken = &m.nb_P;
   m.p_taken_n = n;

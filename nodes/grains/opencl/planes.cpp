@@ -27,11 +27,13 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   // (once a substep: the final collision test there takes them too)
   m.upload_once(m.plane_colliders, colliders, count * sizeof(gr_collider));
   // the start positions, radii and inverse masses where the solve reads them (Impl::upload_once:
-  // sent once a substep), the predicted positions and radii the search's copies when it took these
-  // (its own must stay as it took them: row_reach)
+  // sent once a substep), the predicted positions where the search or the prediction left them,
+  // and the radii the search's copies when it took these (its own must stay as it took them:
+  // row_reach)
   Buffer& Pb = m.arrays[kP];
   m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
-  Buffer& pb = p_there ? m.nb_P : m.plane_p;
+  p_there = p_there && m.p_taken && m.p_taken_n == n;
+  Buffer& pb = p_there ? *m.p_taken : m.plane_p;
   Buffer& rb = radius_there ? m.nb_radius : m.arrays[kRadius];
   if (!p_there) m.upload(pb, p, 3 * n * f);
   if (!radius_there) {

@@ -22,11 +22,11 @@ namespace {
 // (the solved position plus the origin, or the start for a drifting grain: no arithmetic that
 // rounds differently), so the written positions are the same bits, and so are error control's
 // statistics of them, read where the device wrote them. The velocities may differ in their last
-// bits: each side may fuse a multiply and an add where the other does not, in the predicted
-// velocity v + dt F / m (one rounding: 2 eps (|v| + dt |F| / m)) and in the blend and the caps
-// that follow, each a few roundings of |v_new| + |v_pred|: within 8 eps (|v_new| + |v| +
-// dt |F| / m) of each other. Returns the grains the final collision test moved on the device;
-// *rows_there: whether the statistics were read there.
+// bits: each side may fuse a multiply and an add where the other does not in the blend and the
+// caps that follow the predicted velocity v + dt F / m (which both fuse, gr_fmadd), each a few
+// roundings of |v_new| + |v_pred|: within 8 eps (|v_new| + |v| + dt |F| / m) of each other. Returns
+// the grains the final collision test moved on the device; *rows_there: whether the statistics were
+// read there.
 size_t check_finish(const test::Scene& start, bool* rows_there = nullptr) {
   test::Scene host = start, device = start;
   host.s.host_finish = true;
@@ -205,4 +205,37 @@ TEST_CASE("use_opencl: the substep's start made on the device from the last end"
       double(sent.solver.device_traffic().sent) - double(made.solver.device_traffic().sent);
   INFO("sent " << saved / (60.0 * double(sent.size())) << " bytes a grain a substep less");
   CHECK(saved == 24.0 * double(sent.size() * carried) - 28.0 * double(patched));
+}
+
+TEST_CASE("use_opencl: the substep's prediction made on the device", "[opencl][gauss_seidel]") {
+  // The same 512 grains falling onto the ground for 40 substeps, each grain with a mass of its
+  // own and a force of its own on top of its weight (so that dt F / m rounds differently from
+  // grain to grain), twice: the host's predicted positions sent every substep (host_predict),
+  // and made on the device from the start, velocities, masses and force it holds. The device
+  // makes the host's floats (both fuse p = P + dt (v + dt F / m), gr_fmadd), and the search of
+  // rows, the planes and the solve take them there, so the two runs end with the same positions
+  // and velocities, bit for bit, and the second sends exactly 12 bytes a grain a substep less:
+  // the predicted positions, which went up once a substep with the search of rows, or with the
+  // planes when the substep kept its rows.
+  test::Scene sent = test::layered_block(true);
+  for (size_t i = 0; i < sent.size(); ++i) {
+    sent.mass[i] = 0.5f + 0.37f * float(i % 5);
+    sent.extra_force.push_back({0.3f * float(i % 7) - 0.9f, 0.11f * float(i % 3), 0.7f});
+  }
+  test::Scene made = sent;
+  sent.s.host_predict = true;
+  const int substeps = 40;
+  for (int k = 0; k < substeps; ++k) {
+    sent.substep();
+    made.substep();
+    INFO("substep " << k);
+    CHECK(!sent.solver.predicted_on_device());
+    CHECK(made.solver.predicted_on_device());
+  }
+  CHECK(made.solver.contact_lists_kept() > 0);  // kept rows: the planes took the predictions
+  CHECK(sent.P == made.P);
+  CHECK(sent.v == made.v);
+  const double saved =
+      double(sent.solver.device_traffic().sent) - double(made.solver.device_traffic().sent);
+  CHECK(saved == 12.0 * double(sent.size()) * substeps);
 }

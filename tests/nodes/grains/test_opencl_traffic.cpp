@@ -12,14 +12,15 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
           "[opencl][gauss_seidel]") {
   // The default gauss_seidel, its contact list built and kept on the device (the contact-list
   // tests' 512 grains falling onto the ground, 120 substeps: some build a list, the rest keep
-  // it). The host predicts, so these cross for each grain:
-  //  up: the predicted positions (12 B), which the search of rows or planes takes and the solve
-  //      copies there. The start positions (12) and velocities (12) go up on the first substep
-  //      alone (36 B then): from the second on the device makes them from what the last
-  //      substep's end wrote there (GrainsSolver::carry_start), and a grain goes up only when
-  //      its host floats differ from those (28 B: its index, position and velocity; none here,
-  //      where nothing moves the grains between substeps). The radii, masses and inverse
-  //      masses, equal for every grain here, are filled on the device from one word each (4 B);
+  // it). These cross for each grain:
+  //  up: the start positions (12 B) and velocities (12) on the first substep alone: from the
+  //      second on the device makes them from what the last substep's end wrote there
+  //      (GrainsSolver::carry_start), and a grain goes up only when its host floats differ from
+  //      those (28 B: its index, position and velocity; none here, where nothing moves the
+  //      grains between substeps). The device makes the predicted positions from them
+  //      (GrainsSolver::predict), which the search of rows or planes and the solve take there.
+  //      The radii, masses and inverse masses, equal for every grain here, are filled on the
+  //      device from one word each (4 B): nothing a grain after the first substep;
   //  down: the rows' offsets of the planes (4) and, after a search, of the neighbours (4); the
   //      written positions and velocities (24), which the device's velocity update and final
   //      collision test made: 32 B at most;
@@ -51,7 +52,8 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
     CHECK(sc.solver.finish_changed() == 0);
     CHECK(sc.solver.carried_start() == (k > 0));
     CHECK(sc.solver.carried_changed() == 0);
-    CHECK(sent <= (k > 0 ? 12 : 36) * n + 12 + 136 * colliders + 1024);
+    CHECK(sc.solver.predicted_on_device());
+    CHECK(sent <= (k > 0 ? 0 : 24) * n + 12 + 136 * colliders + 1024);
     CHECK(received <= 32 * n + 4 * entries + runs + 4096);
   }
   // the premise: both kinds of substep were measured

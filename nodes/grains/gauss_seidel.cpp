@@ -190,9 +190,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         }
       }
       // grain by grain (gr_seq_build, which a device's build calls too), through a scratch row
+      sync_planes();  // the entries (and rows, colliders) the device's planes left there
       const int* ids = c.d.id;
       const int* collider_of = plane_collider_.data();
-      sync_planes();  // the entries the device's planes left there
       c.g.plane = plane_.data();
       for (int i = 0; i < ni; ++i) {
         const size_t row = (pairs ? g.nbr_offsets[i + 1] - g.nbr_offsets[i] : 0) +
@@ -206,9 +206,18 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       order_waves(c.threads, waves);
     }
     seq_grain_.swap(grain);
-    seq_plane_offsets_.assign(g.plane_offsets,
-                              g.plane_offsets ? g.plane_offsets + n + 1 : g.plane_offsets);
-    seq_plane_collider_.assign(plane_collider_.begin(), plane_collider_.end());
+    // the planes it was built from: kept on the device where they stayed there (which compares
+    // the next substep's with them there), else here
+    seq_planes_there_ = plane_rows_there_;
+    if (seq_planes_there_) {
+      open_device().keep_planes();
+      seq_plane_offsets_.clear();
+      seq_plane_collider_.clear();
+    } else {
+      seq_plane_offsets_.assign(g.plane_offsets,
+                                g.plane_offsets ? g.plane_offsets + n + 1 : g.plane_offsets);
+      seq_plane_collider_.assign(plane_collider_.begin(), plane_collider_.end());
+    }
     seq_friction_[0] = prm.friction_with_particles;
     seq_friction_[1] = prm.friction_with_colliders;
     seq_valid_ = true;
@@ -603,11 +612,16 @@ bool GrainsSolver::seq_list_kept(const SubstepContext& c, bool pairs,
   if (seq_friction_[0] != c.prm.friction_with_particles ||
       seq_friction_[1] != c.prm.friction_with_colliders)
     return false;
-  if (!g.plane_offsets ? !seq_plane_offsets_.empty()
-                       : !std::equal(g.plane_offsets, g.plane_offsets + n_ + 1,
-                                     seq_plane_offsets_.begin(), seq_plane_offsets_.end()))
-    return false;
-  if (g.plane_offsets && plane_collider_ != seq_plane_collider_) return false;
+  if (plane_rows_there_ || seq_planes_there_) {
+    // compared on the device, where both stayed (find_planes' rows_stay, keep_planes)
+    if (!(plane_rows_there_ && seq_planes_there_ && planes_same_)) return false;
+  } else {
+    if (!g.plane_offsets ? !seq_plane_offsets_.empty()
+                         : !std::equal(g.plane_offsets, g.plane_offsets + n_ + 1,
+                                       seq_plane_offsets_.begin(), seq_plane_offsets_.end()))
+      return false;
+    if (g.plane_offsets && plane_collider_ != seq_plane_collider_) return false;
+  }
   // bit for bit (-0 and 0 differ, as a NaN equals itself: the list is what it was built from)
   return grain.size() == seq_grain_.size() &&
          std::memcmp(grain.data(), seq_grain_.data(), grain.size() * sizeof(float)) == 0;

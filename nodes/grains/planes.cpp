@@ -32,15 +32,18 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   // host's alone)
   if (device && !mesh) {
     const bool stay = device->entries_stay && open_device().builds_contacts();
+    const bool rows_stay = stay && device->rows_stay;
     open_device().find_planes(shapes.data(), collider_count, o, query_scale, P, p, radius,
                               inv_mass_.data(), n, device->p_there, device->radius_there, stay,
-                              &plane_offsets_, &plane_, &plane_collider_);
+                              rows_stay, &plane_offsets_, &plane_, &plane_collider_, &planes_same_);
     ++planes_device_;
     planes_on_device_ = true;
     device_.planes_stale = stay;
+    plane_rows_there_ = device_.plane_rows_stale = rows_stay;
     return;
   }
   planes_on_device_ = device_.planes_stale = false;
+  plane_rows_there_ = device_.plane_rows_stale = false;
   // Two passes: count (row sizes), then fill the compact rows; each grain writes only its own
   // row
   auto nearest = [&](long i, float* dist, float* nrm, int32_t* idx) {

@@ -441,7 +441,7 @@ GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& o) {
   if (o.owner) o.owner->sync_device();
   device.reset();
-  holds_contacts = stale = rows_stale = planes_stale = false;
+  holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -458,7 +458,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   if (o.owner) o.owner->sync_device();
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
-  stale = rows_stale = planes_stale = false;
+  stale = rows_stale = planes_stale = plane_rows_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -495,10 +495,13 @@ void GrainsSolver::sync_rows() const {
 }
 
 void GrainsSolver::sync_planes() const {
-  if (!device_.planes_stale) return;
+  if (!device_.planes_stale && !device_.plane_rows_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
-  self.device_.device->fetch_planes(&self.plane_);
-  self.device_.planes_stale = false;
+  const bool rows = device_.plane_rows_stale;
+  self.device_.device->fetch_planes(device_.planes_stale ? &self.plane_ : nullptr,
+                                    rows ? &self.plane_offsets_ : nullptr,
+                                    rows ? &self.plane_collider_ : nullptr);
+  self.device_.planes_stale = self.device_.plane_rows_stale = false;
 }
 
 void GrainsSolver::sync_device() const {
@@ -512,6 +515,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
   p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = false;
+  plane_rows_there_ = planes_same_ = false;
   written_on_device_ = nullptr;
   finished_there_ = collided_there_ = carried_ = false;
   stabilize_passes_ = 0;
@@ -945,6 +949,7 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   device.p_there = first && p_on_device_;
   device.radius_there = first && searched_there_ && rows_true_radius_;
   device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
+  device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
   find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
               c.threads, c.s.use_opencl ? &device : nullptr);
   // the device's planes took the predicted positions (the solve copies them there)

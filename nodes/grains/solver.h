@@ -82,6 +82,10 @@ struct GrainsSettings {
   // use_opencl with gauss_seidel: the host's predicted positions go up, even where the device
   // makes the same floats (GrainsSolver::predict; the tests compare the two)
   bool host_predict = false;
+  // use_opencl with gauss_seidel: the collider planes' rows and colliders come back every
+  // substep, even where the device compares them with the contact list's (the tests compare the
+  // two)
+  bool fetch_plane_rows = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -240,7 +244,7 @@ class GrainsSolver {
   // entries_stay: the host reads no entry this substep but through sync_planes (a gauss_seidel
   // list the device builds, no impact data, no rigid shapes)
   struct DevicePlanes {
-    bool p_there = false, radius_there = false, entries_stay = false;
+    bool p_there = false, radius_there = false, entries_stay = false, rows_stay = false;
   };
   void find_planes(const float* P, const float* p, const Vec3& origin,
                    const ColliderState* colliders, size_t collider_count, float query_scale,
@@ -303,6 +307,8 @@ class GrainsSolver {
     bool stale = false;
     bool rows_stale = false;
     bool planes_stale = false;  // plane_'s entries are the device's (find_planes' entries_stay)
+    // plane_offsets_ (but its last element) and plane_collider_ are the device's (rows_stay)
+    bool plane_rows_stale = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -348,10 +354,14 @@ class GrainsSolver {
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;
-  // the device holds this substep's collider planes (find_planes): they do not go up again
-  bool planes_on_device_ = false;
+  // the device holds this substep's collider planes (find_planes): they do not go up again;
+  // plane_rows_there_: their rows and colliders stayed there too (gauss_seidel's list built
+  // there), where the device compared them with those of the list, kept there when it was
+  // built (seq_planes_there_): planes_same_ says whether they are the same
+  bool planes_on_device_ = false, plane_rows_there_ = false, planes_same_ = false;
   // neighbors_'s indices from the device (DeviceSlot::rows_stale), plane_'s entries
-  // (DeviceSlot::planes_stale), and all of these with the contact list
+  // (DeviceSlot::planes_stale), the planes' rows and colliders (DeviceSlot::plane_rows_stale),
+  // and all of these with the contact list
   void sync_rows() const;
   void sync_planes() const;
   void sync_device() const;
@@ -433,6 +443,7 @@ class GrainsSolver {
   std::vector<float> seq_grain_, seq_grain_now_;
   std::vector<gr_uint> seq_plane_offsets_;
   std::vector<int32_t> seq_plane_collider_;
+  bool seq_planes_there_ = false;  // the device keeps the list's planes instead (keep_planes)
   float seq_friction_[2] = {0, 0};
   bool seq_list_kept(const SubstepContext& c, bool pairs, const std::vector<float>& grain) const;
   std::vector<SeqLoad> seq_loads_;

@@ -200,6 +200,13 @@ struct Iterations::Impl {
   cl_kernel plane_count = nullptr, plane_fill = nullptr;
   Buffer plane_colliders, plane_p;
   size_t plane_entries = 0;  // the entries the last find_planes found
+  size_t plane_grains = 0;   // and the grains it searched
+  // the rows and colliders of the planes a contact list was built from (keep_planes), for
+  // kept_planes_n grains (0: none) and kept_plane_entries entries, which gr_k_plane_same
+  // compares a search's with (its answer in plane_differs)
+  cl_kernel plane_same = nullptr;
+  Buffer kept_plane_offsets, kept_plane_which, plane_differs;
+  size_t kept_planes_n = 0, kept_plane_entries = 0;
 
   ~Impl() {
     for (Buffer& b : arrays) b.release();
@@ -217,7 +224,7 @@ struct Iterations::Impl {
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
                       &force, &end_v, &patch_index, &patch_values, &start, &carry_P,
-                      &predicted})
+                      &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -226,7 +233,7 @@ struct Iterations::Impl {
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
-                        finish, scatter3, final_collision, carry, predict})
+                        finish, scatter3, final_collision, carry, predict, plane_same})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

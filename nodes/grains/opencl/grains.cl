@@ -803,3 +803,24 @@ __kernel void gr_k_plane_fill(GR_PLANE_ARGS, __global const gr_uint* offsets, __
     which[e] = idx[k];
   }
 }
+
+/* Whether the planes gr_k_plane_fill left (offsets, n + 1, and which) are the ones a list was
+ * built from (kept_offsets, kept_which: Iterations::keep_planes), of the same number of entries:
+ * a work-item a grain compares its row's end and colliders and sets *differs (an integer, so
+ * the answer is the same whichever item sets it). */
+__kernel void gr_k_plane_same(__global const gr_uint* offsets, __global const int* which,
+                              __global const gr_uint* kept_offsets,
+                              __global const int* kept_which, int n, __global int* differs) {
+  const int i = (int)get_global_id(0);
+  gr_uint e;
+  if (i >= n) return;
+  if (offsets[i + 1] != kept_offsets[i + 1]) {
+    atomic_or(differs, 1);
+    return;
+  }
+  for (e = offsets[i]; e < offsets[i + 1]; ++e)
+    if (which[e] != kept_which[e]) {
+      atomic_or(differs, 1);
+      return;
+    }
+}

@@ -245,15 +245,22 @@ class Iterations {
   // end (n + 1), the entries (9 floats each: surface point, normal, the collider's velocity
   // there) and their colliders.
   // entries_stay: *plane is sized but not written; the entries stay on the device until
-  // fetch_planes() brings them. The device keeps all three for the calls that follow
-  // (IterationSizes::planes_there).
+  // fetch_planes() brings them. rows_stay: so do the rows and colliders (*which sized, *offsets'
+  // last element alone written: the number of entries), and *same_as_kept says whether they are
+  // those keep_planes() last kept, compared there (false when none are kept for n grains). The
+  // device keeps all three for the calls that follow (IterationSizes::planes_there).
   void find_planes(const gr_collider* colliders, size_t count, const float origin[3],
                    float query_scale, const float* P, const float* p, const float* radius,
                    const float* inv_mass, size_t n, bool p_there, bool radius_there,
-                   bool entries_stay, std::vector<uint32_t>* offsets, std::vector<float>* plane,
-                   std::vector<int32_t>* which);
-  // the entries the last find_planes() found into *plane (sized for them)
-  void fetch_planes(std::vector<float>* plane);
+                   bool entries_stay, bool rows_stay, std::vector<uint32_t>* offsets,
+                   std::vector<float>* plane, std::vector<int32_t>* which, bool* same_as_kept);
+  // what the last find_planes() found and left there into those of *plane (the entries),
+  // *offsets and *which that are set (sized for them)
+  void fetch_planes(std::vector<float>* plane, std::vector<uint32_t>* offsets = nullptr,
+                    std::vector<int32_t>* which = nullptr);
+  // the rows and colliders of the last find_planes() kept there (a device copy) for its later
+  // calls to compare theirs with: those a contact list was built from
+  void keep_planes();
 
   // A new substep: the calls until the next one may take a grain array (gr_grains' per-grain
   // arrays but the rows and planes, and the pins') sent by an earlier one from the same host

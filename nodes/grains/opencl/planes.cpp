@@ -1,6 +1,7 @@
 // The collider planes on an OpenCL device (Iterations::find_planes; the kernels: grains.cl and
 // kernels/planes.h). A work-item a grain counts its planes, a scan turns the counts into rows,
-// and a second pass fills them; the rows, entries and colliders come back.
+// and a second pass fills them; the rows, entries and colliders come back, or stay there and
+// are compared there with those a contact list was built from.
 #include <limits>
 #include <stdexcept>
 #include <vector>
@@ -13,8 +14,9 @@ namespace grains::opencl {
 void Iterations::find_planes(const gr_collider* colliders, size_t count, const float origin[3],
                              float query_scale, const float* P, const float* p, const float* radius,
                              const float* inv_mass, size_t n, bool p_there, bool radius_there,
-                             bool entries_stay, std::vector<uint32_t>* offsets,
-                             std::vector<float>* plane, std::vector<int32_t>* which) {
+                             bool entries_stay, bool rows_stay, std::vector<uint32_t>* offsets,
+                             std::vector<float>* plane, std::vector<int32_t>* which,
+                             bool* same_as_kept) {
   Impl& m = *impl_;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   if (n >= size_t(std::numeric_limits<int>::max()) / 9 ||
@@ -61,25 +63,74 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   arg(kc, 11, rows);
   m.launch(kc, n);
   m.scan(rows, n);
-  m.download(rows, offsets->data(), (n + 1) * u);
+  // with rows_stay only the last offset comes back: the number of entries
+  if (rows_stay)
+    m.download(rows, offsets->data() + n, u, n * u);
+  else
+    m.download(rows, offsets->data(), (n + 1) * u);
   const size_t entries = (*offsets)[n];
   m.plane_entries = entries;
+  m.plane_grains = n;
   // the fall's wide ranges (|p - P|) can make many more rows than a resting pile keeps
   resize_for_rewrite(*plane, 9 * entries);
   resize_for_rewrite(*which, entries);
+  const bool compare = rows_stay && m.kept_planes_n == n && m.kept_plane_entries == entries;
+  if (same_as_kept) *same_as_kept = compare && entries == 0;  // no rows: every one empty
   if (entries == 0) return;
   m.arrays[kPlane].reserve(m.ctx, 9 * entries * f, m.largest);
   m.plane_collider.reserve(m.ctx, entries * sizeof(int), m.largest);
   arg(kf, 11, rows), arg(kf, 12, m.arrays[kPlane]), arg(kf, 13, m.plane_collider);
   m.launch(kf, n);
   if (!entries_stay) m.download(m.arrays[kPlane], plane->data(), 9 * entries * f);
-  m.download(m.plane_collider, which->data(), entries * sizeof(int));
+  if (!rows_stay) m.download(m.plane_collider, which->data(), entries * sizeof(int));
+  if (!compare || !same_as_kept) return;
+  // offsets, which, kept_offsets, kept_which, n, differs
+  cl_kernel k = m.kernel(m.plane_same, "gr_k_plane_same");
+  m.plane_differs.reserve(m.ctx, sizeof(int), m.largest);
+  int differs = 0;
+  check(clEnqueueFillBuffer(m.queue, m.plane_differs.mem, &differs, sizeof differs, 0,
+                            sizeof differs, 0, nullptr, nullptr),
+        "clEnqueueFillBuffer");
+  arg(k, 0, rows), arg(k, 1, m.plane_collider), arg(k, 2, m.kept_plane_offsets);
+  arg(k, 3, m.kept_plane_which), arg(k, 4, items), arg(k, 5, m.plane_differs);
+  m.launch(k, n);
+  m.download(m.plane_differs, &differs, sizeof differs);
+  *same_as_kept = differs == 0;
 }
 
-void Iterations::fetch_planes(std::vector<float>* plane) {
+void Iterations::fetch_planes(std::vector<float>* plane, std::vector<uint32_t>* offsets,
+                              std::vector<int32_t>* which) {
   Impl& m = *impl_;
-  resize_for_rewrite(*plane, 9 * m.plane_entries);
-  m.download(m.arrays[kPlane], plane->data(), 9 * m.plane_entries * sizeof(float));
+  const size_t n = m.plane_grains, entries = m.plane_entries;
+  if (plane) {
+    resize_for_rewrite(*plane, 9 * entries);
+    m.download(m.arrays[kPlane], plane->data(), 9 * entries * sizeof(float));
+  }
+  if (offsets) {
+    offsets->resize(n + 1);
+    m.download(m.arrays[kPlaneOffsets], offsets->data(), (n + 1) * sizeof(gr_uint));
+  }
+  if (which && entries > 0) {
+    which->resize(entries);
+    m.download(m.plane_collider, which->data(), entries * sizeof(int));
+  }
+}
+
+void Iterations::keep_planes() {
+  Impl& m = *impl_;
+  const size_t n = m.plane_grains, entries = m.plane_entries, u = sizeof(gr_uint);
+  m.kept_plane_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  check(clEnqueueCopyBuffer(m.queue, m.arrays[kPlaneOffsets].mem, m.kept_plane_offsets.mem, 0, 0,
+                            (n + 1) * u, 0, nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  if (entries > 0) {
+    m.kept_plane_which.reserve(m.ctx, entries * sizeof(int), m.largest);
+    check(clEnqueueCopyBuffer(m.queue, m.plane_collider.mem, m.kept_plane_which.mem, 0, 0,
+                              entries * sizeof(int), 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+  }
+  m.kept_planes_n = n;
+  m.kept_plane_entries = entries;
 }
 
 }  // namespace grains::opencl

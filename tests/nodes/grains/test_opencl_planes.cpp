@@ -11,6 +11,7 @@
 #include <set>
 #include <vector>
 
+#include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/cloud.h"
 #include "tests/support/support.h"
@@ -104,4 +105,98 @@ TEST_CASE("use_opencl: the device's collider planes are the CPU's, bit for bit",
     sc.s.update_collisions_during_iterations = true;
     same_planes(sc);
   }
+}
+
+TEST_CASE("use_opencl: the device compares the planes' rows and colliders with those it kept",
+          "[opencl]") {
+  // Three grains of radius 0.05 m beside a box 1 m high standing on the ground: one resting on
+  // the ground, one high above it (no plane), one resting on the box (its plane the box's). The
+  // device's planes of these (rows and colliders left there) are kept (keep_planes), then found
+  // again for positions that give the same number of entries: the same positions (the same
+  // rows), the first two grains swapped in height (the same count, other rows), the third on
+  // the ground (the same rows, another collider); and for one grain fewer. Only the first
+  // compares the same, and what comes back with the rows (fetch_planes) is what a search that
+  // brings them gives.
+  const std::vector<ColliderState> world = {test::ground(),
+                                            test::box({2.0f, 0.5f, 0.0f}, {1.0f, 1.0f, 1.0f})};
+  std::vector<gr_collider> colliders;
+  for (const ColliderState& c : world) colliders.push_back(to_gr(c));
+  const float r = 0.05f, origin[3] = {0, 0, 0}, scale = 2.0f;
+  const std::vector<float> radius(3, r), inv_mass(3, 1.0f);
+  const std::vector<float> resting = {0.0f, r, 0.0f, 0.5f, 3.0f, 0.0f, 2.0f, 1.0f + r, 0.0f},
+                           swapped = {0.0f, 3.0f, 0.0f, 0.5f, r, 0.0f, 2.0f, 1.0f + r, 0.0f},
+                           grounded = {0.0f, r, 0.0f, 0.5f, 3.0f, 0.0f, 3.5f, r, 0.0f};
+  opencl::Iterations device;
+  std::vector<uint32_t> offsets, brought;
+  std::vector<float> plane;
+  std::vector<int32_t> which, brought_which;
+  auto found = [&](const std::vector<float>& P, size_t n, bool rows_stay) {
+    bool same = true;
+    device.find_planes(colliders.data(), colliders.size(), origin, scale, P.data(), P.data(),
+                       radius.data(), inv_mass.data(), n, false, false, true, rows_stay, &offsets,
+                       &plane, &which, &same);
+    return same;
+  };
+  for (const auto* P : {&resting, &swapped, &grounded}) {
+    found(*P, 3, false);
+    const std::vector<uint32_t> rows = offsets;
+    const std::vector<int32_t> of = which;
+    REQUIRE(rows.back() == 2);  // the premise: two entries each
+    found(*P, 3, true);
+    CHECK(offsets.back() == 2);
+    device.fetch_planes(nullptr, &brought, &brought_which);
+    CHECK(brought == rows);
+    CHECK(brought_which == of);
+  }
+  found(resting, 3, true);
+  device.keep_planes();
+  CHECK(found(resting, 3, true));
+  CHECK(!found(swapped, 3, true));
+  CHECK(!found(grounded, 3, true));
+  CHECK(!found(resting, 2, true));
+  CHECK(found(resting, 3, true));  // what was kept stays kept
+}
+
+TEST_CASE("use_opencl: the planes' rows compared on the device with the contact list's",
+          "[opencl][gauss_seidel]") {
+  // The contact-list tests' 512 grains, lifted 0.2 m and staggered by up to 2 cm so that they
+  // come within the ground's reach a few at a time, falling onto it for 90 substeps, twice: the
+  // planes' rows and colliders brought back every substep and compared here with those the
+  // contact list was built from (fetch_plane_rows), and left on the device, which keeps the
+  // list's and compares them there. The comparison decides whether the list is kept: the same
+  // decisions give the same lists, so the two runs keep the same number of them and end with
+  // the same positions and velocities, bit for bit. The second receives, each substep, 4 bytes
+  // a grain and 4 an entry less (the rows' offsets but the last, the entries' colliders), less
+  // the comparison's answer (4 bytes) where it ran.
+  test::Scene fetched = test::layered_block(true);
+  for (size_t i = 0; i < fetched.size(); ++i)
+    fetched.P[3 * i + 1] += 0.2f + 0.002f * float((7 * i) % 11);
+  test::Scene compared = fetched;
+  fetched.s.fetch_plane_rows = true;
+  const double n = double(fetched.size());
+  size_t entries_seen = 0, changed = 0, last_entries = 0;
+  for (int k = 0; k < 90; ++k) {
+    const opencl::Traffic f0 = fetched.solver.device_traffic(),
+                          c0 = compared.solver.device_traffic();
+    fetched.substep();
+    compared.substep();
+    const double saved = double(fetched.solver.device_traffic().received - f0.received) -
+                         double(compared.solver.device_traffic().received - c0.received);
+    const size_t entries = fetched.solver.collider_planes().offsets->back();
+    INFO("substep " << k << ": " << entries << " plane entries, " << saved << " B less");
+    CHECK((saved == 4 * n + 4 * double(entries) ||
+           (entries > 0 && saved == 4 * n + 4 * double(entries) - 4)));
+    CHECK(fetched.solver.contact_lists_kept() == compared.solver.contact_lists_kept());
+    entries_seen += entries > 0;
+    changed += k > 0 && entries != last_entries;
+    last_entries = entries;
+  }
+  // the premise: the planes changed over the run (grains reached the ground), and lists were
+  // both kept and built
+  CHECK(entries_seen > 40);
+  CHECK(changed >= 2);
+  CHECK(compared.solver.contact_lists_kept() > 10);
+  CHECK(compared.solver.contact_lists_kept() < 80);
+  CHECK(fetched.P == compared.P);
+  CHECK(fetched.v == compared.v);
 }

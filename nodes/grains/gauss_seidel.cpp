@@ -471,7 +471,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         end_v_.resize(c.s.keep_velocity ? 0 : 3 * n);
         end.P_out = end_P_.data();
         end.v_out = c.s.keep_velocity ? nullptr : end_v_.data();
-        end.force = device_force(g, &end.force_uniform);
+        end.force = c.device_force;
+        end.force_uniform = c.force_uniform;
         end.origin[0] = c.origin.x, end.origin[1] = c.origin.y, end.origin[2] = c.origin.z;
         // the final collision test there too, on the colliders the device's planes took (every
         // one analytic; a mesh's distance is the host's), unless the start velocity is kept

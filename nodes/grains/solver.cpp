@@ -756,12 +756,11 @@ void GrainsSolver::predict(SubstepContext& c) {
   p_next_.resize(3 * n + 1);
 #pragma omp parallel for schedule(static) num_threads(c.threads)
   for (long i = 0; i < ln; ++i) gr_predict(&c.g, &c.prm, p_.data(), static_cast<int>(i));
-  if (c.s.use_opencl && !c.s.host_predict && c.s.contact_solver == kContactGaussSeidel) {
-    bool uniform = false;
-    const float* force = device_force(c.g, &uniform);
-    open_device().predict(c.g, c.prm, n, force, uniform);
-    predicted_there_ = p_on_device_ = true;
-  }
+  if (!c.s.use_opencl || c.s.contact_solver != kContactGaussSeidel) return;
+  c.device_force = device_force(c.g, &c.force_uniform);
+  if (c.s.host_predict) return;
+  open_device().predict(c.g, c.prm, n, c.device_force, c.force_uniform);
+  predicted_there_ = p_on_device_ = true;
 }
 
 // Which friction passes run, and the sums the iterations keep for them and the impact data

@@ -344,8 +344,9 @@ class GrainsSolver {
   std::vector<uint8_t> carry_differs_;
   std::vector<gr_uint> carry_changed_;
   const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
-  // g's force as the device reads it at the substep's end: null (none), one row that every
-  // grain reads (*uniform), else a copy of each grain's row (end_force_)
+  // g's force as the device reads it (its prediction and end; SubstepContext::device_force):
+  // null (none), one row that every grain reads (*uniform), else a copy of each grain's row
+  // (end_force_)
   const float* device_force(const gr_grains& g, bool* uniform);
   std::vector<float> end_P_, end_v_, end_force_;
   std::vector<gr_uint> end_changed_;

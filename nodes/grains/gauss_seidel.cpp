@@ -94,7 +94,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const gr_params& prm = c.prm;
   const size_t n = n_;
   const int ni = static_cast<int>(n);
-  float* p = p_.data();
+  // the predicted positions: the host reads them where the device does not solve (use_opencl
+  // below takes them there)
+  float* p = c.s.use_opencl ? p_.data() : host_p(c);
   const float* P = c.g.P;
   const float* const start = P;  // the substep's start before pre-stabilization
   const float dt = prm.dt;
@@ -483,7 +485,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
         }
         on_device.finish = &end;
       }
-      cl.solve_sequential(gd, prm, size, p_.data(), on, on_device, c.iterations);
+      cl.solve_sequential(gd, prm, size, p_for_device(c, p_on_device_), on, on_device,
+                          c.iterations);
     } else {
       // the contacts and the grains' arrays stay on the device between the passes (only the
       // positions cross for the shapes' projections here); the contacts come back once, after
@@ -493,7 +496,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       opencl::SequentialContacts kept = on;
       kept.stay = true;
       kept.loaded = nullptr;
-      cl.solve_sequential(unpinned, prm, size, p_.data(), kept, on_device, 0);
+      cl.solve_sequential(unpinned, prm, size, p_for_device(c, p_on_device_), kept, on_device, 0);
       unpinned.P = g.P;  // the passes' start: pre-stabilization's, which the solve brought back
       kept.there = true;
       for (int it = 0; it < c.iterations; ++it) {
@@ -504,6 +507,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       cl.fetch_contacts(on);
     }
     p = p_.data();
+    if (!finished_there_) p_made_ = true;  // the solved positions came back into p_
     device_.stale = on.stay;
     device_.loaded = loaded_there;
   }

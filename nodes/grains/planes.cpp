@@ -23,14 +23,10 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   // the colliders in the shared functions' form (a mesh keeps its kind and poses there)
   std::vector<gr_collider>& shapes = plane_colliders_;
   shapes.resize(collider_count);
-  bool mesh = false;
-  for (size_t c = 0; c < collider_count; ++c) {
-    shapes[c] = to_gr(colliders[c]);
-    mesh = mesh || colliders[c].shape.kind == ShapeKind::Mesh;
-  }
+  for (size_t c = 0; c < collider_count; ++c) shapes[c] = to_gr(colliders[c]);
   // use_opencl: analytic colliders' planes are found on the device (a mesh's distance is the
   // host's alone)
-  if (device && !mesh) {
+  if (device && !any_mesh(colliders, collider_count)) {
     const bool stay = device->entries_stay && open_device().builds_contacts();
     const bool rows_stay = stay && device->rows_stay;
     open_device().find_planes(shapes.data(), collider_count, o, query_scale, P, p, radius,
@@ -96,6 +92,12 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
       which[e] = idx[k];
     }
   }
+}
+
+bool GrainsSolver::any_mesh(const ColliderState* colliders, size_t count) {
+  for (size_t c = 0; c < count; ++c)
+    if (colliders[c].shape.kind == ShapeKind::Mesh) return true;
+  return false;
 }
 
 }  // namespace grains

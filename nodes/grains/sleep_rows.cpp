@@ -16,4 +16,13 @@ bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* 
                           static_cast<int>(k), reach) != 0;
 }
 
+float rows_moved2(const float* p, const float* b, size_t n, int threads) {
+  float moved2 = 0.0f;
+  const long ln = static_cast<long>(n);
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(max : moved2)
+  for (long i = 0; i < ln; ++i)
+    gr_rows_moved(p, b, static_cast<int>(i), static_cast<int>(i) + 1, &moved2);
+  return moved2;
+}
+
 }  // namespace grains

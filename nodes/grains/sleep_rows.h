@@ -2,7 +2,7 @@
 // (kernels/row_stats.h), counted as a device counts them, bit for bit: this file's source is
 // compiled without a multiply and an add fused (CMakeLists.txt), as the device runs the shared
 // functions. GrainsSolver::sleep_rows_on_device makes them on the device while the rows are
-// there.
+// there. The solver's Verlet test (GrainsSolver::keep_rows) is made here alike.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -18,5 +18,9 @@ uint32_t sleep_row_near(const NeighborList& rows, const float* P, const float* r
 // whether one of them flagged in `fast` (a byte a grain) lies within reach x (r_k + r_j)
 bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* radius,
                          const uint8_t* fast, size_t k, float reach);
+
+// the largest squared distance between the positions p and b (n x 3 each) of one grain
+// (gr_rows_moved), over `threads` threads: the same float whatever their number
+float rows_moved2(const float* p, const float* b, size_t n, int threads);
 
 }  // namespace grains

@@ -47,6 +47,7 @@ static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slo
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "nodes/grains/sleep_rows.h"
 #include "nodes/grains/substep_context.h"
 
 namespace grains {
@@ -441,7 +442,7 @@ GrainsSolver::DeviceSlot::DeviceSlot(const DeviceSlot& o) {
 GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& o) {
   if (o.owner) o.owner->sync_device();
   device.reset();
-  holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = false;
+  holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -458,7 +459,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   if (o.owner) o.owner->sync_device();
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
-  stale = rows_stale = planes_stale = plane_rows_stale = false;
+  stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -504,8 +505,17 @@ void GrainsSolver::sync_planes() const {
   self.device_.planes_stale = self.device_.plane_rows_stale = false;
 }
 
+void GrainsSolver::sync_rows_p() const {
+  if (!device_.rows_p_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.rows_p_.resize(3 * n_);
+  self.device_.device->fetch_rows_p(self.rows_p_.data(), n_);
+  self.device_.rows_p_stale = false;
+}
+
 void GrainsSolver::sync_device() const {
   sync_rows();
+  sync_rows_p();
   sync_planes();
   sync_contacts();
 }
@@ -514,7 +524,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
                            size_t collider_count, GrainsStats* stats) {
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
-  p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = false;
+  p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = p_made_ = false;
   plane_rows_there_ = planes_same_ = false;
   written_on_device_ = nullptr;
   finished_there_ = collided_there_ = carried_ = false;
@@ -746,21 +756,33 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
 // step 1: each grain's predicted position p_ (gr_predict). With use_opencl and gauss_seidel the
 // device makes the same floats (gr_fmadd: fused on both) from the start, velocities, masses and
 // force it holds, which then need not go up: the search of rows or planes and the solve take
-// them there; the host's stay for what it reads of them (the Verlet test that keeps the rows,
-// the planes it finds itself: a mesh collider's).
+// them there, and the Verlet test that keeps the rows is made there (keep_rows). The host makes
+// them too only where a stage reads them here (host_p): the planes it finds itself (a mesh
+// collider's), its own search of rows where the device's declines, a contact list it builds.
 void GrainsSolver::predict(SubstepContext& c) {
   const size_t n = n_;
-  const long ln = static_cast<long>(n);
   // one float past the last grain: the contact loop loads positions 4 floats at a time
   p_.resize(3 * n + 1);
   p_next_.resize(3 * n + 1);
+  if (c.s.use_opencl && c.s.contact_solver == kContactGaussSeidel) {
+    c.device_force = device_force(c.g, &c.force_uniform);
+    if (!c.s.host_predict) {
+      open_device().predict(c.g, c.prm, n, c.device_force, c.force_uniform);
+      predicted_there_ = p_on_device_ = true;
+      return;
+    }
+  }
+  host_p(c);
+}
+
+float* GrainsSolver::host_p(const SubstepContext& c) {
+  if (p_made_) return p_.data();
+  const long ln = static_cast<long>(n_);
 #pragma omp parallel for schedule(static) num_threads(c.threads)
   for (long i = 0; i < ln; ++i) gr_predict(&c.g, &c.prm, p_.data(), static_cast<int>(i));
-  if (!c.s.use_opencl || c.s.contact_solver != kContactGaussSeidel) return;
-  c.device_force = device_force(c.g, &c.force_uniform);
-  if (c.s.host_predict) return;
-  open_device().predict(c.g, c.prm, n, c.device_force, c.force_uniform);
-  predicted_there_ = p_on_device_ = true;
+  p_made_ = true;
+  ++host_predictions_;
+  return p_.data();
 }
 
 // Which friction passes run, and the sums the iterations keep for them and the impact data
@@ -811,7 +833,7 @@ void GrainsSolver::open_search(SubstepContext& c) {
       !(s.clumping_weight > 0) && !c.constraints_on && !s.update_neighbors_during_iterations;
 }
 
-bool GrainsSolver::keep_rows(const SubstepContext& c) const {
+bool GrainsSolver::keep_rows(const SubstepContext& c) {
   const size_t n = n_;
   const GrainsSettings& s = c.s;
   if (!c.reusable || !rows_valid_ || rows_ids_.size() != n || !(rows_skin_ > 0)) return false;
@@ -820,15 +842,14 @@ bool GrainsSolver::keep_rows(const SubstepContext& c) const {
     return false;
   for (size_t i = 0; i < n; ++i)
     if (rows_ids_[i] != grain_id(c.d, i) || rows_radius_[i] != radius_[i]) return false;
-  const float* p = p_.data();
-  const float* b = rows_p_.data();
-  const long ln = static_cast<long>(n);
+  // on the device where both the rows' positions and this substep's prediction are there (the
+  // same float: gr_rows_moved, unfused on both sides, and a largest in any order)
   float moved2 = 0;
-#pragma omp parallel for schedule(static) num_threads(c.threads) reduction(max : moved2)
-  for (long i = 0; i < ln; ++i) {
-    const float x = p[3 * i] - b[3 * i], y = p[3 * i + 1] - b[3 * i + 1],
-                z = p[3 * i + 2] - b[3 * i + 2];
-    moved2 = std::max(moved2, x * x + y * y + z * z);
+  if (device_.rows_p_stale && predicted_there_ && device_.device->rows_moved(n, &moved2)) {
+    ++rows_tests_device_;
+  } else {
+    sync_rows_p();
+    moved2 = rows_moved2(host_p(c), rows_p_.data(), n, c.threads);
   }
   return std::sqrt(moved2) < 0.25f * rows_skin_;
 }
@@ -866,11 +887,12 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
     // use_opencl: the rows found on the device (the same rows; the host's search where the
     // device cannot, opencl/iterations.h)
-    const bool on_device = c.s.use_opencl && open_device().find_neighbours(
-                                                 p_.data(), c.search_radius, n, c.q, neighbors_,
-                                                 stay, first && predicted_there_);
+    const bool on_device =
+        c.s.use_opencl &&
+        open_device().find_neighbours(p_for_device(c, first && predicted_there_), c.search_radius,
+                                      n, c.q, neighbors_, stay, first && predicted_there_);
     if (!on_device)
-      search_.find(p_.data(), c.search_radius, n, c.q, neighbors_,
+      search_.find(host_p(c), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
     rows_on_device_ = on_device;
     searched_there_ = first && on_device;
@@ -878,8 +900,11 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     rows_true_radius_ = c.search_radius == radius_;
     device_.rows_stale = on_device && stay;
     rows_left_ += device_.rows_stale;
-    rows_valid_ = false;
-    if (first && c.reusable) remember_rows(c.d, c.s, c.search_radius, threads);
+    rows_valid_ = device_.rows_p_stale = false;
+    // the positions the rows were built from: the device's where its search took them
+    if (first && c.reusable)
+      remember_rows(c.d, c.s, c.search_radius, on_device && predicted_there_ ? nullptr : host_p(c),
+                    threads);
   }
   if (!stay) sync_rows();  // the host reads them below or later in the substep
   // mutually constrained grains that do not collide: drop their pairs once here rather than
@@ -949,8 +974,12 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   device.radius_there = first && searched_there_ && rows_true_radius_;
   device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
-  find_planes(P0_, p_.data(), c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale,
-              c.threads, c.s.use_opencl ? &device : nullptr);
+  // the device's planes take the predicted positions there; the host's (a mesh collider's)
+  // read them here
+  const bool device_planes = c.s.use_opencl && !any_mesh(c.colliders, c.collider_count);
+  const float* p = device_planes ? p_for_device(c, device.p_there) : host_p(c);
+  find_planes(P0_, p, c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale, c.threads,
+              c.s.use_opencl ? &device : nullptr);
   // the device's planes took the predicted positions (the solve copies them there)
   if (first && planes_on_device_) p_on_device_ = true;
   g.plane_offsets = plane_offsets_.data();
@@ -1008,6 +1037,13 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
   open_device().run(gd, c.prm, device_sizes(c), x, c.acc, count, whole ? friction_pass : friction_after,
                     whole ? c.s.accurate_friction : false);
+}
+
+// the predicted positions for a device's call that takes them where the device holds them (its
+// prediction, or a search's copy of it) when `there`: p_ unmade then, which it does not read;
+// else the host's
+float* GrainsSolver::p_for_device(const SubstepContext& c, bool there) {
+  return there && device_.device && device_.device->holds_prediction(n_) ? p_.data() : host_p(c);
 }
 
 // the device, opened at the first substep that asks for it
@@ -1363,7 +1399,7 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
 // half the skin no such pair can touch; the solver rebuilds at a quarter, leaving the other
 // quarter to the iterations' own corrections within a substep.
 void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
-                                 const float* search_radius, int threads) {
+                                 const float* search_radius, const float* p, int threads) {
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
   rows_valid_ = s.neighbor_query_scale > 1;
@@ -1374,7 +1410,10 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
   rows_ids_.resize(n);
   for (size_t i = 0; i < n; ++i) rows_ids_[i] = grain_id(d, i);
   rows_radius_.assign(radius_, radius_ + n);
-  rows_p_.assign(p_.begin(), p_.begin() + 3 * n);
+  // the positions the rows were built from: p, or the device's, where its search took them
+  // from its prediction (null p), left there for its Verlet test
+  device_.rows_p_stale = !p;
+  if (p) rows_p_.assign(p, p + 3 * n);
   float r_min = std::numeric_limits<float>::infinity(), r_max = 0;
   for (size_t i = 0; i < n; ++i) {
     r_min = std::min(r_min, search_radius[i]);
@@ -1388,7 +1427,8 @@ void GrainsSolver::remember_rows(const GrainsData& d, const GrainsSettings& s,
   if (!(device_.rows_stale &&
         device_.device->row_reach(rows_true_radius_ ? nullptr : radius_, n, full, r_max, &reach))) {
     sync_rows();
-    const float* p = p_.data();
+    sync_rows_p();
+    p = rows_p_.data();
     const gr_uint* offsets = neighbors_.offsets.data();
     const gr_uint* indices = neighbors_.indices.data();
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(min : reach)
@@ -1462,7 +1502,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(seq_loads_);
   index_loads();
   seq_valid_ = false;
-  device_.holds_contacts = device_.stale = device_.rows_stale = false;
+  device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
 }
 
 // ---- contact history ----

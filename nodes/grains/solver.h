@@ -219,6 +219,10 @@ class GrainsSolver {
   bool carried_start() const { return carried_; }
   // whether the device made the last substep's predicted positions (predict)
   bool predicted_on_device() const { return predicted_there_; }
+  // the substeps so far in which the host made the predicted positions too (host_p: a stage
+  // read them here), and the Verlet tests of kept rows made on the device (keep_rows)
+  size_t host_predictions() const { return host_predictions_; }
+  size_t rows_tests_on_device() const { return rows_tests_device_; }
   size_t carried_changed() const { return carried_ ? carry_changed_.size() : 0; }
   // contact_solver gauss_seidel's contacts of the last substep in the order they are swept, in
   // blocks, colours and waves, as opencl::Iterations takes them (opencl/iterations.h); valid
@@ -249,6 +253,8 @@ class GrainsSolver {
   void find_planes(const float* P, const float* p, const Vec3& origin,
                    const ColliderState* colliders, size_t collider_count, float query_scale,
                    int threads, const DevicePlanes* device);
+  // whether one of the colliders is a mesh, whose planes the host finds (planes.cpp)
+  static bool any_mesh(const ColliderState* colliders, size_t count);
 
   // contact history (friction anchors): each contact's slip its friction has not yet removed,
   // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
@@ -275,9 +281,13 @@ class GrainsSolver {
   // accumulated), the iterations with their friction passes and pins
   void bind_inputs(SubstepContext& c);
   void predict(SubstepContext& c);
+  // p_: this substep's predicted positions, made here the first time the host reads them
+  // (predict), or the positions a later stage wrote there
+  float* host_p(const SubstepContext& c);
+  float* p_for_device(const SubstepContext& c, bool there);
   void open_sums(SubstepContext& c);
   void open_search(SubstepContext& c);
-  bool keep_rows(const SubstepContext& c) const;
+  bool keep_rows(const SubstepContext& c);
   void find_pairs(SubstepContext& c, bool first);
   void update_planes(SubstepContext& c, bool first);
   void iterate(SubstepContext& c);
@@ -290,7 +300,7 @@ class GrainsSolver {
 
   // Verlet reuse of the neighbour rows across substeps (keep_rows)
   void remember_rows(const GrainsData& d, const GrainsSettings& s, const float* search_radius,
-                     int threads);
+                     const float* p, int threads);
 
   // the iterations on an OpenCL device (use_opencl), opened at the first substep that asks; a
   // copy of the solver opens its own. holds_contacts: the device holds the contact list from its
@@ -309,6 +319,9 @@ class GrainsSolver {
     bool planes_stale = false;  // plane_'s entries are the device's (find_planes' entries_stay)
     // plane_offsets_ (but its last element) and plane_collider_ are the device's (rows_stay)
     bool plane_rows_stale = false;
+    // rows_p_ (the positions the kept rows were built from) is the device's: the search there
+    // took them, and its Verlet test reads them there (keep_rows)
+    bool rows_p_stale = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -327,6 +340,10 @@ class GrainsSolver {
   // and the solve then copy them there rather than sending them again); searched_there_: the
   // device's search of rows took them this substep (and the radii with them)
   bool p_on_device_ = false, predicted_there_ = false, searched_there_ = false;
+  // p_ holds this substep's predicted positions (host_p), or what a later stage wrote there
+  bool p_made_ = false;
+  size_t host_predictions_ = 0,
+         rows_tests_device_ = 0;  // host_predictions(), rows_tests_on_device()
   // the written positions (d.P) error control's statistics sent to the device this substep
   mutable const float* written_on_device_ = nullptr;
   // gauss_seidel's device solve ended the substep there (SequentialSolve::Finish): each grain's
@@ -364,6 +381,7 @@ class GrainsSolver {
   // (DeviceSlot::planes_stale), the planes' rows and colliders (DeviceSlot::plane_rows_stale),
   // and all of these with the contact list
   void sync_rows() const;
+  void sync_rows_p() const;
   void sync_planes() const;
   void sync_device() const;
   // whether this substep's rows may stay on the device: it reads them nowhere else

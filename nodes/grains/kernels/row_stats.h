@@ -1,8 +1,10 @@
 /* What the host reads along the neighbour rows after a substep, for a run of grains: the
- * overlap statistics error control measures (GrainsSolver::contact_stats) and the reach of the
- * rows cut at max_neighbors (the Verlet skin, GrainsSolver::remember_rows). The CPU takes all
- * grains as one run; a device takes runs in parallel and the host combines them in run order
- * (opencl/neighbours.cpp), so that neither the rows nor a serial pass over them crosses to the host.
+ * overlap statistics error control measures (GrainsSolver::contact_stats), the reach of the
+ * rows cut at max_neighbors (the Verlet skin, GrainsSolver::remember_rows) and how far the
+ * grains have moved since the rows were built (the Verlet test, GrainsSolver::keep_rows). The
+ * CPU takes all grains as one run; a device takes runs in parallel and the host combines them
+ * in run order (opencl/neighbours.cpp), so that neither the rows nor a serial pass over them
+ * crosses to the host.
  *
  * Overlap of a touching pair (i < j, each pair once, from i's row): (r_i + r_j - |x_ij|) /
  * (r_i + r_j). Reach of a full row: its farthest candidate's distance beyond r_i + r_max. Needs
@@ -77,6 +79,21 @@ GR_INLINE int gr_row_within(const GR_GLOBAL float* P, const GR_GLOBAL float* rad
   const float x = P[3 * j] - P[3 * k], y = P[3 * j + 1] - P[3 * k + 1],
               z = P[3 * j + 2] - P[3 * k + 2];
   return gr_sqrt(x * x + y * y + z * z) < reach * (radius[k] + radius[j]);
+}
+
+/* The Verlet test of the rows kept across substeps (GrainsSolver::keep_rows): the largest
+ * squared distance any grain of [first, end) has moved from b, the predicted positions the rows
+ * were built from, to p, this substep's, into *moved2. Written out unfused, so that the host
+ * and a device keep or rebuild the rows in the same substeps. */
+GR_INLINE void gr_rows_moved(const GR_GLOBAL float* p, const GR_GLOBAL float* b, int first,
+                             int end, float* moved2) {
+  GR_ROW_EXACT
+  int i;
+  for (i = first; i < end; ++i) {
+    const float x = p[3 * i] - b[3 * i], y = p[3 * i + 1] - b[3 * i + 1],
+                z = p[3 * i + 2] - b[3 * i + 2];
+    *moved2 = gr_max(*moved2, x * x + y * y + z * z);
+  }
 }
 
 /* grain k's neighbours within reach x (r_k + r_j) */

@@ -161,10 +161,12 @@ struct Iterations::Impl {
       nb_keys, nb_indices, nb_sums;
   bool rows_found = false;  // nb_offsets and nb_indices hold the rows the last search gave
   size_t rows_grains = 0;   // the grains of those rows
+  size_t searched_n = 0;    // nb_P holds the positions the last search took, of this many grains
   // what the host reads along the rows (kernels/row_stats.h): the kernels, the positions they
   // read (the radii: arrays[kRadius] or nb_radius), each run's results; the sleeping test's
-  // kernel, its fast flags and its words
+  // kernel, its fast flags and its words; the Verlet test's kernel (the rows' positions: nb_P)
   cl_kernel row_overlaps = nullptr, row_reach = nullptr, sleep_rows = nullptr;
+  cl_kernel rows_moved = nullptr;
   Buffer stats_P, stats_part, sleep_fast, sleep_out;
   // the substep's end (gr_k_finish), which writes the grains' positions into stats_P: for how
   // many grains it last did (0: stats_P holds positions sent since, or none); the grains the
@@ -233,7 +235,8 @@ struct Iterations::Impl {
                         stabilize_grains, largest_part, bounds, cell_count,
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
-                        finish, scatter3, final_collision, carry, predict, plane_same})
+                        finish, scatter3, final_collision, carry, predict, plane_same,
+                        rows_moved})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -674,7 +674,8 @@ __kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global cons
 /* What the host reads along the rows (kernels/row_stats.h), run w of `runs` (grains
  * [n w / runs, n (w + 1) / runs)) a work-item; the host combines the runs in order.
  * gr_k_row_overlaps: touching pairs, the largest overlap and the overlaps' sum at part[3 w ...];
- * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none) */
+ * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none);
+ * gr_k_rows_moved: the largest squared move from b, the rows' positions, to p at part[w] */
 #include "row_stats.h"
 
 __kernel void gr_k_row_overlaps(__global const float* P, __global const float* radius,
@@ -700,6 +701,15 @@ __kernel void gr_k_row_reach(__global const float* p, __global const float* radi
   gr_row_reach(p, radius, offsets, indices, (int)((long)n * w / runs),
                (int)((long)n * (w + 1) / runs), full, r_max, &reach);
   part[w] = reach;
+}
+
+__kernel void gr_k_rows_moved(__global const float* p, __global const float* b, int n, int runs,
+                              __global float* part) {
+  const int w = (int)get_global_id(0);
+  float moved2 = 0.0f;
+  if (w >= runs) return;
+  gr_rows_moved(p, b, (int)((long)n * w / runs), (int)((long)n * (w + 1) / runs), &moved2);
+  part[w] = moved2;
 }
 
 /* gr_k_sleep_rows: each grain's sleeping reads along its row (gr_row_sleep), a work-item a

@@ -185,6 +185,16 @@ class Iterations {
   bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,
                     const std::vector<gr_uint>* written_there = nullptr);
   bool row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach);
+  // whether the device holds predicted positions of n grains (the last predict(), or a search
+  // of rows or planes that took them), which calls given p_there take there
+  bool holds_prediction(size_t n) const;
+  // The Verlet test of those rows (gr_rows_moved): into *moved2 the largest squared distance
+  // a grain has moved from the positions the last search took to those predict() made this
+  // substep. False when that search took no positions of n grains or there is no such
+  // prediction.
+  bool rows_moved(size_t n, float* moved2);
+  // the positions the last search took (n x 3) into out
+  void fetch_rows_p(float* out, size_t n);
   // The grains node's sleeping test's reads along those rows: each grain's word (gr_row_sleep)
   // into out (n) at the world positions P (n x 3, uploaded; null: those the last row_overlaps()
   // took) with the radii `radius` (n, as row_overlaps takes them) and a byte a grain, `fast`;

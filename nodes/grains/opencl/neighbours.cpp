@@ -1,6 +1,7 @@
 // The neighbour rows on an OpenCL device (Iterations::find_neighbours; the kernels and why they
 // give the CPU's rows: kernels/grid.h and grains.cl). The host reads back the bounding box (7
 // floats a work-item of gr_k_bounds) to lay out the grid, and the row offsets to size the rows.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -82,6 +83,7 @@ void Iterations::Impl::open_neighbours() {
   row_fill = make("gr_k_row_fill");
   row_overlaps = make("gr_k_row_overlaps");
   row_reach = make("gr_k_row_reach");
+  rows_moved = make("gr_k_rows_moved");
   sleep_rows = make("gr_k_sleep_rows");
 }
 
@@ -112,6 +114,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   m.rows_found = false;
   m.rows_grains = n;
+  m.searched_n = 0;
   if (n >= size_t(std::numeric_limits<int>::max()) / 3) return false;
   m.open_neighbours();
   if (!m.bounds) return false;
@@ -124,13 +127,14 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   // refuse the substep; the entries' keys are checked once their number is known
   if (4 * n * f > m.largest) return false;
   const int count = static_cast<int>(n);
-  if (p_there && m.p_taken == &m.predicted && m.p_taken_n == n)
-    m.copy_positions(m.nb_P, m.predicted, n);
-  else
+  if (!(p_there && holds_prediction(n)))
     m.upload(m.nb_P, P, 3 * n * f);
+  else if (m.p_taken != &m.nb_P)
+    m.copy_positions(m.nb_P, *m.p_taken, n);
   m.upload(m.nb_radius, radius, n * f);
   m.p_taken = &m.nb_P;
   m.p_taken_n = n;
+  m.searched_n = n;
 
   // the finite positions' box and the largest radius
   m.nb_part.reserve(m.ctx, 7 * kBoundsItems * f, m.largest);
@@ -263,6 +267,37 @@ bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_
   m.download(m.stats_part, part.data(), runs * sizeof(float));
   for (float r : part) *reach = std::min(*reach, r);  // the smallest, in any order the same
   return true;
+}
+
+bool Iterations::holds_prediction(size_t n) const {
+  return impl_->p_taken && impl_->p_taken_n == n;
+}
+
+bool Iterations::rows_moved(size_t n, float* moved2) {
+  Impl& m = *impl_;
+  if (!m.rows_moved || n != m.searched_n || m.p_taken != &m.predicted || m.p_taken_n != n)
+    return false;
+  *moved2 = 0.0f;
+  if (n == 0) return true;
+  const size_t runs = kBoundsItems;
+  m.stats_part.reserve(m.ctx, runs * sizeof(float), m.largest);
+  const int count = static_cast<int>(n), items = static_cast<int>(runs);
+  cl_kernel k = m.rows_moved;
+  arg(k, 0, m.predicted), arg(k, 1, m.nb_P), arg(k, 2, count), arg(k, 3, items);
+  arg(k, 4, m.stats_part);
+  m.launch(k, runs);
+  std::vector<float> part(runs);
+  m.download(m.stats_part, part.data(), runs * sizeof(float));
+  for (float d : part) *moved2 = std::max(*moved2, d);  // the largest, in any order the same
+  return true;
+}
+
+void Iterations::fetch_rows_p(float* out, size_t n) {
+  Impl& m = *impl_;
+  if (n != m.searched_n)
+    throw std::logic_error(
+        "fetch_rows_p: the device's last search took no positions of these grains");
+  if (n) m.download(m.nb_P, out, 3 * n * sizeof(float));
 }
 
 bool Iterations::sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n,

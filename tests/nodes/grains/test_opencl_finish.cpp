@@ -239,3 +239,45 @@ TEST_CASE("use_opencl: the substep's prediction made on the device", "[opencl][g
       double(sent.solver.device_traffic().sent) - double(made.solver.device_traffic().sent);
   CHECK(saved == 12.0 * double(sent.size()) * substeps);
 }
+
+TEST_CASE("use_opencl: the Verlet test of kept rows made on the device", "[opencl][gauss_seidel]") {
+  // The same fall twice: the host's predicted positions made and sent every substep
+  // (host_predict), whose Verlet test the host makes against the positions its rows were built
+  // from, and the device's prediction, tested there against the positions its search took. Both
+  // sides compute the largest move unfused (gr_rows_moved), so they keep and rebuild the rows in
+  // the same substeps and end with the same positions and velocities, bit for bit; and the
+  // second run's host makes no prediction at all: no stage reads one here (the search, the
+  // planes, the solve and the end are the device's).
+  test::Scene sent = test::layered_block(true);
+  for (size_t i = 0; i < sent.size(); ++i) {
+    sent.mass[i] = 0.5f + 0.37f * float(i % 5);
+    sent.extra_force.push_back({0.3f * float(i % 7) - 0.9f, 0.11f * float(i % 3), 0.7f});
+  }
+  test::Scene made = sent;
+  sent.s.host_predict = true;
+  const int substeps = 40;
+  for (int k = 0; k < substeps; ++k) {
+    sent.substep();
+    made.substep();
+  }
+  CHECK(sent.solver.host_predictions() == size_t(substeps));
+  CHECK(made.solver.host_predictions() == 0);
+  CHECK(sent.solver.rows_tests_on_device() == 0);
+  // every substep but the first tested the rows there: kept, or rebuilt (in the same substeps)
+  const size_t searched = made.solver.rows_left_on_device();
+  CHECK(sent.solver.rows_left_on_device() == searched);
+  CHECK(made.solver.rows_tests_on_device() == size_t(substeps - 1));
+  CHECK(searched > 1);
+  CHECK(searched < size_t(substeps));
+  CHECK(sent.P == made.P);
+  CHECK(sent.v == made.v);
+  // a copy of the solver takes the rows' positions from the device, and goes on alike
+  test::Scene copy = made;
+  for (int k = 0; k < 10; ++k) {
+    made.substep();
+    copy.substep();
+    sent.substep();
+  }
+  CHECK(copy.P == made.P);
+  CHECK(sent.P == made.P);
+}

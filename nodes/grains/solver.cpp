@@ -788,14 +788,17 @@ float* GrainsSolver::host_p(const SubstepContext& c) {
 // Which friction passes run, and the sums the iterations keep for them and the impact data
 // (c.acc). Friction (gr_friction_pass): once after the loop, or after every iteration with
 // accurate friction, bounded by the normal corrections each contact applied, summed over the
-// iterations.
+// iterations. gauss_seidel's contacts carry their own friction and loads (kernels/sequential.h)
+// and read none of the pairs' sums nor the per-iteration ones; the collider planes' sums serve
+// rigid shapes' friction with the colliders in either solver (project_shapes).
 void GrainsSolver::open_sums(SubstepContext& c) {
   const GrainsSettings& s = c.s;
   const size_t n = n_;
+  const bool jacobi = s.contact_solver != kContactGaussSeidel;
   c.pair_friction_pass =
-      c.pairs_on && s.internal_collisions_weight > 0 && s.friction_with_particles > 0;
+      jacobi && c.pairs_on && s.internal_collisions_weight > 0 && s.friction_with_particles > 0;
   c.collider_friction_pass = c.colliders_on && s.friction_with_colliders > 0;
-  if (s.accurate_friction && (c.pair_friction_pass || c.collider_friction_pass)) {
+  if (jacobi && s.accurate_friction && (c.pair_friction_pass || c.collider_friction_pass)) {
     friction_dx_.assign(3 * n, 0.0f);
     c.acc.friction_dx = friction_dx_.data();
   }
@@ -854,12 +857,12 @@ bool GrainsSolver::keep_rows(const SubstepContext& c) {
   return std::sqrt(moved2) < 0.25f * rows_skin_;
 }
 
-// The rows' indices stay on the device (find_pairs) when nothing in the substep reads them on
-// the host: gauss_seidel builds its contact list there (not with impact data or rigid shapes,
-// whose lists the host builds; gauss_seidel.cpp brings the rows when the device's build
-// declines), and there are no constrained pairs to drop and no clumping, whose Jacobi group
-// takes the host's rows. Error control's overlap statistics and the Verlet skin are then
-// reduced there (contact_stats, remember_rows); the grains node's sleeping test, a saved state
+// The rows (their offsets and indices) stay on the device (find_pairs) when nothing in the
+// substep reads them on the host: gauss_seidel builds its contact list there (not with impact
+// data or rigid shapes, whose lists the host builds; gauss_seidel.cpp brings the rows when the
+// device's build declines), and there are no constrained pairs to drop and no clumping, whose
+// Jacobi group takes the host's rows. Error control's overlap statistics and the Verlet skin are
+// then reduced there (contact_stats, remember_rows); the grains node's sleeping test, a saved state
 // and a copy of the solver bring them (sync_rows).
 bool GrainsSolver::rows_stay(const SubstepContext& c) const {
   const GrainsSettings& s = c.s;
@@ -878,7 +881,8 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
   // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
   // carry the sums over and use the search's own store.
-  // use_opencl: the rows' indices stay on the device when the substep reads them only there
+  // use_opencl: the rows stay on the device when the substep reads them only there (their
+  // number of entries comes back)
   const bool stay = first && rows_stay(c) && open_device().builds_contacts();
   if (first && keep_rows(c)) {
     c.same_rows = true;

@@ -306,8 +306,9 @@ class GrainsSolver {
   // copy of the solver opens its own. holds_contacts: the device holds the contact list from its
   // last call (a copy's device holds nothing); stale: the host's copy of it (seq_, seq_loads_)
   // is older, the device's list ending with `loaded` normal loads, and sync_contacts() brings
-  // it. So may the neighbour rows' indices (rows_stale): the device's search left them there
-  // and the substep read them nowhere else (rows_stay), sync_rows() brings them. A copy or move
+  // it. So may the neighbour rows (rows_stale: their offsets but the last, and their indices):
+  // the device's search left them there and the substep read them nowhere else (rows_stay),
+  // sync_rows() brings them. A copy or move
   // of the solver brings both first: declared before neighbors_, seq_ and seq_loads_, the slot
   // is copied before them, and its copy and move call owner->sync_device() (owner: the solver
   // whose substep last ran, set there; stale only after one)
@@ -377,7 +378,7 @@ class GrainsSolver {
   // there), where the device compared them with those of the list, kept there when it was
   // built (seq_planes_there_): planes_same_ says whether they are the same
   bool planes_on_device_ = false, plane_rows_there_ = false, planes_same_ = false;
-  // neighbors_'s indices from the device (DeviceSlot::rows_stale), plane_'s entries
+  // neighbors_'s offsets and indices from the device (DeviceSlot::rows_stale), plane_'s entries
   // (DeviceSlot::planes_stale), the planes' rows and colliders (DeviceSlot::plane_rows_stale),
   // and all of these with the contact list
   void sync_rows() const;

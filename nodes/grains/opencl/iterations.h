@@ -160,13 +160,13 @@ class Iterations {
   // NeighborSearch::find gives it, bit for bit. False when the device cannot (out's contents
   // are then unspecified): it lacks double precision (cl_khr_fp64), a radius is infinite, or
   // a buffer would exceed the device's largest.
-  // indices_there: only out's offsets come back; its indices stay on the device (out.indices
-  // left empty) until fetch_rows() brings them, and row_overlaps() and row_reach() read them
-  // there. p_there: P is the positions predict() made there, which are copied, not sent.
+  // indices_there: only the rows' number of entries comes back (out.offsets sized n + 1, its
+  // last element set); the offsets and indices stay on the device (out.indices left empty)
+  // until fetch_rows() brings them, and row_overlaps() and row_reach() read them there.
+  // p_there: P is the positions predict() made there, which are copied, not sent.
   bool find_neighbours(const float* P, const float* radius, size_t n, const NeighborQuery& q,
                        NeighborList& out, bool indices_there = false, bool p_there = false);
-  // the indices of the rows the last find_neighbours() gave into out.indices (out.offsets as it
-  // gave them)
+  // the rows the last find_neighbours() left there into out (out.offsets sized as it gave them)
   void fetch_rows(NeighborList& out);
   // What the host reads along those rows (kernels/row_stats.h), computed where they are in runs
   // of grains and combined in run order. row_overlaps: the overlap statistics of the positions

@@ -195,7 +195,11 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   m.launch(m.row_count, n);
   m.scan(m.nb_offsets, n);
   out.offsets.resize(n + 1);
-  m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
+  // rows that stay there: only their number of entries, the last offset, comes back
+  if (indices_there)
+    m.download(m.nb_offsets, out.offsets.data() + n, u, n * u);
+  else
+    m.download(m.nb_offsets, out.offsets.data(), (n + 1) * u);
   const size_t entries = out.offsets[n];
   out.indices.resize(indices_there ? 0 : entries);
   if (entries * sizeof(gr_pair_key_t) > m.largest) {
@@ -214,11 +218,14 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
 
 void Iterations::fetch_rows(NeighborList& out) {
   Impl& m = *impl_;
-  out.indices.resize(out.offsets.empty() ? 0 : out.offsets.back());
-  if (out.indices.empty()) return;  // no rows, or none the search had to fill
+  const size_t entries = out.offsets.empty() ? 0 : out.offsets.back();
+  out.indices.resize(entries);
+  // no search there, or one that found no pair to look for: its rows came back whole
+  if (!m.rows_found && entries == 0) return;
   if (!m.rows_found || out.offsets.size() != m.rows_grains + 1)
     throw std::logic_error("fetch_rows: the device holds no such rows");
-  m.download(m.nb_indices, out.indices.data(), out.indices.size() * sizeof(gr_uint));
+  m.download(m.nb_offsets, out.offsets.data(), out.offsets.size() * sizeof(gr_uint));
+  if (entries) m.download(m.nb_indices, out.indices.data(), entries * sizeof(gr_uint));
 }
 
 bool Iterations::row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,

@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 #include <cfloat>
 #include <cmath>
+#include <functional>
 #include <vector>
 
 #include "engine/mesh_shape.h"
@@ -207,6 +208,33 @@ TEST_CASE("use_opencl: the substep's start made on the device from the last end"
   CHECK(saved == 24.0 * double(sent.size() * carried) - 28.0 * double(patched));
 }
 
+// 512 grains falling onto the ground, each grain with a mass of its own and a force of its own
+// on top of its weight (so that dt F / m rounds differently from grain to grain), run twice for
+// `substeps` substeps: `sent` with the host's predicted positions sent every substep
+// (host_predict), `made` with the device's; each(sent, made) after every substep.
+namespace {
+struct FallTwice {
+  test::Scene sent, made;
+};
+FallTwice fall_twice(int substeps,
+                     const std::function<void(const test::Scene&, const test::Scene&)>& each) {
+  FallTwice f{test::layered_block(true), test::Scene{}};
+  for (size_t i = 0; i < f.sent.size(); ++i) {
+    f.sent.mass[i] = 0.5f + 0.37f * float(i % 5);
+    f.sent.extra_force.push_back({0.3f * float(i % 7) - 0.9f, 0.11f * float(i % 3), 0.7f});
+  }
+  f.made = f.sent;
+  f.sent.s.host_predict = true;
+  for (int k = 0; k < substeps; ++k) {
+    f.sent.substep();
+    f.made.substep();
+    INFO("substep " << k);
+    each(f.sent, f.made);
+  }
+  return f;
+}
+}  // namespace
+
 TEST_CASE("use_opencl: the substep's prediction made on the device", "[opencl][gauss_seidel]") {
   // The same 512 grains falling onto the ground for 40 substeps, each grain with a mass of its
   // own and a force of its own on top of its weight (so that dt F / m rounds differently from
@@ -217,21 +245,12 @@ TEST_CASE("use_opencl: the substep's prediction made on the device", "[opencl][g
   // and velocities, bit for bit, and the second sends exactly 12 bytes a grain a substep less:
   // the predicted positions, which went up once a substep with the search of rows, or with the
   // planes when the substep kept its rows.
-  test::Scene sent = test::layered_block(true);
-  for (size_t i = 0; i < sent.size(); ++i) {
-    sent.mass[i] = 0.5f + 0.37f * float(i % 5);
-    sent.extra_force.push_back({0.3f * float(i % 7) - 0.9f, 0.11f * float(i % 3), 0.7f});
-  }
-  test::Scene made = sent;
-  sent.s.host_predict = true;
   const int substeps = 40;
-  for (int k = 0; k < substeps; ++k) {
-    sent.substep();
-    made.substep();
-    INFO("substep " << k);
+  FallTwice f = fall_twice(substeps, [](const test::Scene& sent, const test::Scene& made) {
     CHECK(!sent.solver.predicted_on_device());
     CHECK(made.solver.predicted_on_device());
-  }
+  });
+  const test::Scene &sent = f.sent, &made = f.made;
   CHECK(made.solver.contact_lists_kept() > 0);  // kept rows: the planes took the predictions
   CHECK(sent.P == made.P);
   CHECK(sent.v == made.v);
@@ -248,18 +267,9 @@ TEST_CASE("use_opencl: the Verlet test of kept rows made on the device", "[openc
   // the same substeps and end with the same positions and velocities, bit for bit; and the
   // second run's host makes no prediction at all: no stage reads one here (the search, the
   // planes, the solve and the end are the device's).
-  test::Scene sent = test::layered_block(true);
-  for (size_t i = 0; i < sent.size(); ++i) {
-    sent.mass[i] = 0.5f + 0.37f * float(i % 5);
-    sent.extra_force.push_back({0.3f * float(i % 7) - 0.9f, 0.11f * float(i % 3), 0.7f});
-  }
-  test::Scene made = sent;
-  sent.s.host_predict = true;
   const int substeps = 40;
-  for (int k = 0; k < substeps; ++k) {
-    sent.substep();
-    made.substep();
-  }
+  FallTwice f = fall_twice(substeps, [](const test::Scene&, const test::Scene&) {});
+  test::Scene &sent = f.sent, &made = f.made;
   CHECK(sent.solver.host_predictions() == size_t(substeps));
   CHECK(made.solver.host_predictions() == 0);
   CHECK(sent.solver.rows_tests_on_device() == 0);

@@ -308,10 +308,11 @@ class GrainsSolver {
   // is older, the device's list ending with `loaded` normal loads, and sync_contacts() brings
   // it. So may the neighbour rows (rows_stale: their offsets but the last, and their indices):
   // the device's search left them there and the substep read them nowhere else (rows_stay),
-  // sync_rows() brings them. A copy or move
-  // of the solver brings both first: declared before neighbors_, seq_ and seq_loads_, the slot
-  // is copied before them, and its copy and move call owner->sync_device() (owner: the solver
-  // whose substep last ran, set there; stale only after one)
+  // sync_rows() brings them; and the positions they were built from (rows_p_stale,
+  // sync_rows_p()). A copy or move of the solver brings all of these first: declared before
+  // neighbors_, rows_p_, seq_ and seq_loads_, the slot is copied before them, and its copy and
+  // move call owner->sync_device() (owner: the solver whose substep last ran, set there; stale
+  // only after one)
   struct DeviceSlot {
     std::unique_ptr<opencl::Iterations> device;
     bool holds_contacts = false;

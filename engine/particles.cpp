@@ -79,7 +79,54 @@ void ParticleStore::resize_attribute(Attribute& a, std::string_view name, size_t
     for (int j = 0; j < c; ++j) a.f[k * c + j] = d ? d->value[j] : 0.0f;
 }
 
+AttributeHolds& AttributeHolds::operator=(const AttributeHolds& o) {
+  o.fetch_all();
+  holds_.clear();  // this store's arrays are replaced by the copy's
+  return *this;
+}
+AttributeHolds& AttributeHolds::operator=(AttributeHolds&& o) noexcept {
+  o.fetch_all();
+  holds_.clear();
+  return *this;
+}
+
+void AttributeHolds::hold(std::string_view name, const void* owner, std::function<void()> fetch) {
+  fetch_held(name);  // an earlier holder's values first
+  holds_.push_back({std::string(name), owner, std::move(fetch)});
+}
+bool AttributeHolds::held(std::string_view name) const {
+  for (const Hold& h : holds_)
+    if (h.name == name) return true;
+  return false;
+}
+bool AttributeHolds::held_by(std::string_view name, const void* owner) const {
+  for (const Hold& h : holds_)
+    if (h.name == name && h.owner == owner) return true;
+  return false;
+}
+void AttributeHolds::claim(std::string_view name, const void* owner) {
+  for (size_t k = 0; k < holds_.size(); ++k)
+    if (holds_[k].name == name && holds_[k].owner == owner) {
+      holds_.erase(holds_.begin() + static_cast<long>(k));
+      return;
+    }
+}
+// the hold is dropped before its fetch runs: the fetch writes through the store's accessors
+void AttributeHolds::fetch_held(std::string_view name) const {
+  for (size_t k = 0; k < holds_.size(); ++k)
+    if (holds_[k].name == name) {
+      std::function<void()> f = std::move(holds_[k].fetch);
+      holds_.erase(holds_.begin() + static_cast<long>(k));
+      f();
+      return;
+    }
+}
+void AttributeHolds::fetch_all() const {
+  while (!holds_.empty()) fetch_held(std::string(holds_.front().name));
+}
+
 Attribute& ParticleStore::add(std::string_view name, AttribType type) {
+  holds_.fetch(name);
   auto it = attribs_.find(name);
   if (it != attribs_.end()) {
     if (it->second.type != type)
@@ -101,14 +148,17 @@ Attribute& ParticleStore::add(std::string_view name) {
 }
 
 Attribute* ParticleStore::find(std::string_view name) {
+  holds_.fetch(name);
   auto it = attribs_.find(name);
   return it == attribs_.end() ? nullptr : &it->second;
 }
 const Attribute* ParticleStore::find(std::string_view name) const {
+  holds_.fetch(name);
   auto it = attribs_.find(name);
   return it == attribs_.end() ? nullptr : &it->second;
 }
 void ParticleStore::remove_attribute(std::string_view name) {
+  holds_.fetch(name);
   auto it = attribs_.find(name);
   if (it != attribs_.end()) attribs_.erase(it);
 }
@@ -127,6 +177,7 @@ const float* ParticleStore::v3_if(std::string_view name) const {
 }
 
 size_t ParticleStore::add_points(size_t count) {
+  holds_.fetch_all();
   size_t first = n_;
   n_ += count;
   for (auto& [name, a] : attribs_) resize_attribute(a, name, n_);
@@ -137,6 +188,7 @@ size_t ParticleStore::add_points(size_t count) {
 
 void ParticleStore::remove_points(const std::vector<uint8_t>& dead) {
   if (dead.size() != n_) throw std::logic_error("remove_points: mask size differs from point count");
+  holds_.fetch_all();
   std::vector<int32_t> remap(n_, -1);
   size_t kept = 0;
   for (size_t k = 0; k < n_; ++k)

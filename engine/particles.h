@@ -7,6 +7,7 @@
 // deletions compact every array in order, so survivors keep their relative order and ids.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <string>
 #include <string_view>
@@ -42,6 +43,40 @@ std::string group_attribute(std::string_view group);  // "group_" + group
 // digits and '_', not starting with a digit), or "".
 std::string group_name_problem(std::string_view group);
 
+// Held attributes. A node that leaves an attribute's newest values where it made them (an
+// OpenCL device, between the substeps of a frame) holds it: `fetch` writes them into the
+// store's array, and runs, once, before anything reads or changes that attribute through the
+// store: its accessors, `attributes()`, births, deletions, a copy or a move. The holder vouches
+// that the values it holds are finite (the engine's check after each node skips them). The
+// holder may take its hold back without the fetch (`claim`), going on from the values it kept.
+class AttributeHolds {
+ public:
+  AttributeHolds() = default;
+  // a copy or a move: the source's holds fetched first (they write the arrays copied next)
+  AttributeHolds(const AttributeHolds& o) { o.fetch_all(); }
+  AttributeHolds(AttributeHolds&& o) noexcept { o.fetch_all(); }
+  AttributeHolds& operator=(const AttributeHolds& o);
+  AttributeHolds& operator=(AttributeHolds&& o) noexcept;
+
+  void hold(std::string_view name, const void* owner, std::function<void()> fetch);
+  bool held(std::string_view name) const;
+  bool held_by(std::string_view name, const void* owner) const;
+  void claim(std::string_view name, const void* owner);  // no fetch
+  void fetch(std::string_view name) const {
+    if (!holds_.empty()) fetch_held(name);
+  }
+  void fetch_all() const;
+
+ private:
+  struct Hold {
+    std::string name;
+    const void* owner;
+    std::function<void()> fetch;
+  };
+  void fetch_held(std::string_view name) const;
+  mutable std::vector<Hold> holds_;
+};
+
 class ParticleStore {
  public:
   ParticleStore();  // creates P, v, force, mass, pscale, id, ispbd
@@ -56,7 +91,10 @@ class ParticleStore {
   Attribute* find(std::string_view name);
   const Attribute* find(std::string_view name) const;
   void remove_attribute(std::string_view name);
-  const std::map<std::string, Attribute, std::less<>>& attributes() const { return attribs_; }
+  const std::map<std::string, Attribute, std::less<>>& attributes() const {
+    holds_.fetch_all();
+    return attribs_;
+  }
 
   // Raw arrays, created with their defaults if missing.
   float* f(std::string_view name) { return add(name, AttribType::Float).f.data(); }
@@ -66,6 +104,17 @@ class ParticleStore {
   const float* f_if(std::string_view name) const;
   const int32_t* i_if(std::string_view name) const;
   const float* v3_if(std::string_view name) const;
+
+  // Held attributes (AttributeHolds above).
+  void hold(std::string_view name, const void* owner, std::function<void()> fetch) {
+    holds_.hold(name, owner, std::move(fetch));
+  }
+  bool held(std::string_view name) const { return holds_.held(name); }
+  bool held_by(std::string_view name, const void* owner) const {
+    return holds_.held_by(name, owner);
+  }
+  void claim(std::string_view name, const void* owner) { holds_.claim(name, owner); }
+  void fetch_held() const { holds_.fetch_all(); }
 
   // Births: appends `count` points with default attributes and fresh ids; returns the first index.
   size_t add_points(size_t count);
@@ -94,6 +143,7 @@ class ParticleStore {
  private:
   void resize_attribute(Attribute& a, std::string_view name, size_t n) const;
 
+  AttributeHolds holds_;  // first: a copy or a move fetches them before the arrays go
   size_t n_ = 0;
   int32_t next_id_ = 0;
   std::map<std::string, Attribute, std::less<>> attribs_;

@@ -149,13 +149,12 @@ namespace {
 // r / 64, the default, is 16 substeps for 1 cm grains at 24 fps (tests/nodes/grains/
 // test_pockets.cpp; docs/heap-angle.md "Pockets and pyramids").
 int motion_substeps(const ParticleStore& pts, double fps, int most, const MotionBounds& bounds) {
-  const float* P = pts.v3_if("P");
-  const float* v = pts.v3_if("v");
+  const float* v = pts.v3_if("v");  // positions are not read (they may stay held: particles.h)
   const float* F = pts.v3_if("force");
   const float* m = pts.f_if("mass");
   const float* r = pts.f_if("pscale");
   const int32_t* pbd = pts.i_if("ispbd");
-  if (!P || !v || !r || !pbd) return 1;
+  if (!pts.has("P") || !v || !r || !pbd) return 1;
   double worst = 1;
   double fall = 0;  // the largest acc / r
   for (size_t k = 0; k < pts.size(); ++k) {
@@ -182,14 +181,16 @@ int refine_to(int base, int need, int most) {
   return s;
 }
 
-
 // A position, velocity or force that is not finite stops the run where it first appears: the
 // next substep would spread it to every grain it touches, and the frames would fill with NaN.
 // Checked after each node of each substep, so the error names the node that made it; the frames
-// already written stay. Returns the first such point's index, or -1.
+// already written stay. An attribute a node holds (particles.h) is not read: its holder has
+// checked it. Returns the first such point's index, or -1.
 long first_non_finite(const ParticleStore& pts, int threads) {
   const long n = static_cast<long>(pts.size());
-  const float* arrays[3] = {pts.v3_if("P"), pts.v3_if("v"), pts.v3_if("force")};
+  const float* arrays[3];
+  const char* names[3] = {"P", "v", "force"};
+  for (int a = 0; a < 3; ++a) arrays[a] = pts.held(names[a]) ? nullptr : pts.v3_if(names[a]);
   long first = n;
   // serial below 64k points: a parallel region per node per substep cost small scenes with many
   // substeps (a 50-grain stack) several times their solve on two busy cores
@@ -373,6 +374,8 @@ void Simulation::step_object(SimObject& obj) {
       refined = factor > 1;
     }
   }
+  // what a node left held between the substeps (particles.h) comes back once, for the frame
+  obj.pts.fetch_held();
   if (control)
     obj.substeps = frame_error < 0.2f * tolerance && substeps > base ? substeps / 2 : substeps;
   obj.stats = FrameStats{};

@@ -28,7 +28,7 @@ class ForceNode : public Node {
     bool per_mass = p.ignore_mass;
     const std::string& group = p.group;
     float* F = s.v3("force");
-    const float* v = s.v3("v");
+    const float* v = drag != 0 ? s.v3("v") : nullptr;  // read only for drag (held: particles.h)
     const float* m = s.f("mass");
     const int32_t* g = group.empty() ? nullptr : s.i_if(group_attribute(group));
     if (!group.empty() && !g) return;  // the group does not exist yet: no member

@@ -43,18 +43,21 @@ class SolverNode : public Node {
     ParticleStore& s = ctx.pts;
     size_t n = s.size();
     float dt = static_cast<float>(ctx.time.dt);
+    float* age = s.f("age");
+    const int32_t* pbd = s.i("ispbd");
+    for (size_t k = 0; k < n; ++k) age[k] += dt;
+    // only the points no grains node moved are read: a grains node's may stay held where it
+    // left them (particles.h)
+    if (std::all_of(pbd, pbd + n, [](int32_t b) { return b != 0; })) return;
     float* P = s.v3("P");
     float* v = s.v3("v");
-    float* age = s.f("age");
     const float* F = s.v3("force");
     const float* m = s.f("mass");
     const float* r = s.f("pscale");
-    const int32_t* pbd = s.i("ispbd");
     const std::vector<ColliderState>& cols = ctx.colliders;
 #pragma omp parallel for schedule(static)
     for (long long kk = 0; kk < static_cast<long long>(n); ++kk) {
       size_t k = static_cast<size_t>(kk);
-      age[k] += dt;
       if (pbd[k]) continue;
       Vec3 x0 = load3(P, k);
       Vec3 v0 = load3(v, k);

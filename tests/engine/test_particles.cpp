@@ -1,4 +1,6 @@
 #include <catch2/catch.hpp>
+#include <functional>
+#include <vector>
 
 #include "engine/particles.h"
 
@@ -58,4 +60,69 @@ TEST_CASE("groups and type checks", "[particles]") {
   CHECK_FALSE(s.in_group("top", 0));
   CHECK_FALSE(s.in_group("missing", 0));
   CHECK_THROWS(s.add("pscale", AttribType::Int));
+}
+
+TEST_CASE("a held attribute is fetched once, before the first read or change of it",
+          "[particles]") {
+  // A node leaves P held (its newest values elsewhere): the fetch writes them, once, at the
+  // first access to P through any accessor, and not before; the other attributes are read and
+  // written meanwhile without it. A claim takes the hold back without the fetch; births,
+  // deletions, attributes() and a copy or a move fetch every hold first.
+  ParticleStore s;
+  s.add_points(4);
+  const int owner = 0;
+  int fetches = 0;
+  auto hold = [&] {
+    s.hold("P", &owner, [&] {
+      ++fetches;
+      s.v3("P")[3] = 7.0f;  // through the store: the hold is gone by then
+    });
+  };
+  hold();
+  CHECK(s.held("P"));
+  CHECK(s.held_by("P", &owner));
+  CHECK_FALSE(s.held_by("P", &fetches));
+  CHECK_FALSE(s.held("v"));
+  s.v3("v")[0] = 1.0f;
+  s.f("mass")[0] = 2.0f;
+  CHECK(s.has("P"));
+  CHECK(fetches == 0);
+  CHECK(s.v3_if("P")[3] == 7.0f);
+  CHECK(fetches == 1);
+  CHECK_FALSE(s.held("P"));
+  CHECK(s.v3("P")[3] == 7.0f);
+  CHECK(fetches == 1);
+
+  hold();
+  s.claim("P", &owner);
+  CHECK_FALSE(s.held("P"));
+  s.v3("P")[3] = 0.0f;
+  CHECK(fetches == 1);
+
+  const std::vector<std::function<void()>> fetch_all = {
+      [&] { s.add_points(1); },
+      [&] { s.remove_points(std::vector<uint8_t>(s.size(), 0)); },
+      [&] { CHECK(s.attributes().count("P") == 1); },
+      [&] { s.fetch_held(); },
+      [&] {
+        ParticleStore copy = s;
+        CHECK(copy.v3_if("P")[3] == 7.0f);
+        CHECK_FALSE(copy.held("P"));
+      },
+      [&] {
+        ParticleStore moved = std::move(s);
+        CHECK(moved.v3_if("P")[3] == 7.0f);
+        s = moved;
+      },
+  };
+  for (size_t k = 0; k < fetch_all.size(); ++k) {
+    INFO("case " << k);
+    s.v3("P")[3] = 0.0f;
+    hold();
+    const int before = fetches;
+    fetch_all[k]();
+    CHECK(fetches == before + 1);
+    CHECK_FALSE(s.held("P"));
+    CHECK(s.v3_if("P")[3] == 7.0f);
+  }
 }

@@ -469,6 +469,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       opencl::SequentialSolve::Finish end;
       finished_there_ = !c.impacts && !c.s.host_finish;
       if (finished_there_) {
+        device_.end_P_stale = device_.end_v_stale = false;  // this end replaces the last one
         end_P_.resize(3 * n);
         end_v_.resize(c.s.keep_velocity ? 0 : 3 * n);
         end.P_out = end_P_.data();
@@ -483,6 +484,10 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
           end.colliders = plane_colliders_.data();
           end.collider_count = plane_colliders_.size();
         }
+        // it stays there where the caller lets it (GrainsData::may_hold_end) and nothing here
+        // reads it: no final collision test here (a mesh), no constraints' strain
+        const bool test_here = c.s.final_collision_test && c.colliders_on && !collided_there_;
+        end.stay = end_stays_ = c.d.may_hold_end && end.v_out && !test_here && !c.constraints_on;
         on_device.finish = &end;
       }
       cl.solve_sequential(gd, prm, size, p_for_device(c, p_on_device_), on, on_device,

@@ -13,6 +13,8 @@
 // Collision feedback (enable_collision_feedback): each collider receives the opposite of the
 // momentum it gave the grains, and the angular impulse (x_contact - collider translate) x that,
 // accumulated over the frame (engine ColliderFeedback -> DIR/colliders.csv).
+#include "nodes/grains/grains_node.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -50,15 +52,42 @@ class GrainsNode : public Node {
     const int32_t* id = s.i_if("id");
     members_key_.resize(n);
     for (size_t k = 0; k < n; ++k) members_key_[k] = id ? id[idx_[k]] : static_cast<int32_t>(idx_[k]);
-    if (ctx.time.substep == 0 || members_key_ != sorted_key_ || sorted_.size() != n) {
+    const bool resorted =
+        ctx.time.substep == 0 || members_key_ != sorted_key_ || sorted_.size() != n;
+    if (resorted) {
       sort_by_cell(s, st, half_sep);
       sorted_ = idx_;
       sorted_key_ = members_key_;
     } else {
       idx_ = sorted_;
     }
-    gather3(s.v3("P"), P_);
-    gather3(s.v3("v"), v_);
+    // the sleeping test, impact data, collision feedback, a global mass shock and constraints
+    // read the grains' positions here every substep; else the substep's end may stay on the
+    // device (use_opencl, GrainsData::may_hold_end), held in the store (hold_end)
+    const bool impacts = st.add_impact_data, feedback = st.enable_collision_feedback;
+    const bool sleeping = st.sleep_speed > 0 && !impacts && !feedback;
+    const bool may_hold = st.use_opencl && !sleeping && !impacts && !feedback &&
+                          st.mass_shock() != MassShock::Global && s.prim_count() == 0;
+    // where this node's last substep left its end held and nothing has read its positions
+    // since (nor changed its velocities), the substep starts from there: the same grains in
+    // the same order, the velocities either still held or brought back unchanged
+    bool start_held = false;
+    if (may_hold && !resorted && s.held_by("P", this) && solver_.end_held()) {
+      start_held = s.held_by("v", this);
+      if (!start_held) {
+        gather3(s.v3("v"), v_);
+        start_held = std::memcmp(v_.data(), solver_.end_velocities(), 3 * n * sizeof(float)) == 0;
+      }
+    }
+    if (start_held) {
+      s.claim("P", this);
+      s.claim("v", this);
+      P_.resize(3 * n);  // written by the substep, not read
+      v_.resize(3 * n);
+    } else {
+      gather3(s.v3("P"), P_);  // a hold of this node's is fetched first
+      gather3(s.v3("v"), v_);
+    }
     gather1(s.f("mass"), mass_);
     gather1(s.f("pscale"), r_);
     for (float& r : r_)
@@ -96,7 +125,6 @@ class GrainsNode : public Node {
         tp_.assign(3 * n, 0.0f);  // the attribute's default: the origin
       d.targetP = tp_.data();
     }
-    const bool impacts = st.add_impact_data, feedback = st.enable_collision_feedback;
     const size_t K = GrainsSolver::kContactSlots;
     if ((impacts || feedback) && !ctx.colliders.empty()) {
       imp_j_.assign(3 * K * n, 0.0f);
@@ -110,8 +138,9 @@ class GrainsNode : public Node {
     }
     // a sleeper exchanges no impulse with the colliders: impact data and collision feedback
     // keep every grain awake, so that a resting heap still presses on what holds it
-    const bool sleeping = st.sleep_speed > 0 && !impacts && !feedback;
     if (sleeping) put_to_sleep(s, d, st);
+    d.may_hold_end = may_hold;
+    d.start_held = start_held;
     // stats only for error control: the evaluator measures each frame itself (measure_frame)
     GrainsStats stats;
     solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(),
@@ -133,14 +162,18 @@ class GrainsNode : public Node {
       if (ctx.feedback_on) *ctx.feedback_on = true;
     }
 
-    float* P = s.v3("P");
-    float* v = s.v3("v");
     int32_t* pbd = s.i("ispbd");
-    for (size_t k = 0; k < n; ++k) {
-      uint32_t i = idx_[k];
-      store3(P, i, load3(P_.data(), k));
-      store3(v, i, load3(v_.data(), k));
-      pbd[i] = 1;
+    for (size_t k = 0; k < n; ++k) pbd[idx_[k]] = 1;
+    if (solver_.end_held()) {
+      hold_end(s);
+    } else {
+      float* P = s.v3("P");
+      float* v = s.v3("v");
+      for (size_t k = 0; k < n; ++k) {
+        uint32_t i = idx_[k];
+        store3(P, i, load3(P_.data(), k));
+        store3(v, i, load3(v_.data(), k));
+      }
     }
     if (d.shockmass) {
       float* sm = s.f("shockmass");
@@ -151,6 +184,7 @@ class GrainsNode : public Node {
   // the solver's (its cell order is made again at each frame's first substep; impact data
   // starts again with each frame)
   void save_state(StateWriter& w) const override { solver_.save_state(w); }
+  const GrainsSolver& solver() const { return solver_; }
   void load_state(StateReader& r) override { solver_.load_state(r); }
 
  private:
@@ -421,6 +455,21 @@ class GrainsNode : public Node {
   // that grains near in space are near in memory and the iterations' neighbour reads stay in
   // cache. Only the solver's compact copy is ordered; the store keeps its order. The order
   // depends on the positions alone, so every thread count sees the same one.
+  // The substep's end held on the device (GrainsSolver::end_held): the store's P and v of this
+  // node's grains are brought back by the first read of each (particles.h), through the grains'
+  // order as it is now (held_idx_: the next substep may sort them again), or taken up by the
+  // next substep (cook: start_held). Each is 12 bytes a grain that crosses once a frame, or not
+  // at all where the frame ends with the next hold, instead of every substep.
+  void hold_end(ParticleStore& s) {
+    held_idx_ = idx_;
+    auto scatter = [this, &s](const char* name, const float* from) {
+      float* to = s.v3(name);
+      for (size_t k = 0; k < held_idx_.size(); ++k) store3(to, held_idx_[k], load3(from, k));
+    };
+    s.hold("P", this, [this, scatter] { scatter("P", solver_.end_positions()); });
+    s.hold("v", this, [this, scatter] { scatter("v", solver_.end_velocities()); });
+  }
+
   void sort_by_cell(ParticleStore& s, const GrainsSettings& st, float half_sep) {
     const size_t n = idx_.size();
     if (n < 2) return;
@@ -463,6 +512,7 @@ class GrainsNode : public Node {
   // the grains in the solver's order (store indices), and the ids of the grains in store order
   // it was made for
   std::vector<uint32_t> sorted_;
+  std::vector<uint32_t> held_idx_;  // hold_end()
   std::vector<int32_t> members_key_, sorted_key_;
   std::vector<float> imp_j_, imp_x_, imp_n_;        // collider contacts of the substep
   std::vector<int32_t> imp_c_;
@@ -475,6 +525,11 @@ class GrainsNode : public Node {
 };
 
 }  // namespace
+
+const GrainsSolver* grains_solver(const Node& node) {
+  const GrainsNode* g = dynamic_cast<const GrainsNode*>(&node);
+  return g ? &g->solver() : nullptr;
+}
 
 void register_grains_node() {
   NodeTypeInfo t;

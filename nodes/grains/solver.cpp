@@ -112,6 +112,21 @@ int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
 // then lies within S of the origin o while both exceed 1.5 S, so x / o is within [0.6, 1.67]:
 // x - o is exact (Sterbenz), and so is adding o back, so a grain that does not move keeps its
 // world position bit for bit. Near the origin the shift is 0 and nothing changes.
+// the origin of the box [lo, hi] of the grains' finite positions (lo > hi: none)
+Vec3 box_origin(const float lo_f[3], const float hi_f[3]) {
+  if (!(lo_f[0] <= hi_f[0])) return {};
+  const double lo[3] = {lo_f[0], lo_f[1], lo_f[2]}, hi[3] = {hi_f[0], hi_f[1], hi_f[2]};
+  double extent = 0;
+  for (int a = 0; a < 3; ++a) extent = std::max(extent, hi[a] - lo[a]);
+  const double S = std::exp2(std::ceil(std::log2(std::max(extent, 1e-6))));
+  double o[3];
+  for (int a = 0; a < 3; ++a) {
+    const double centre = 0.5 * (lo[a] + hi[a]);
+    o[a] = std::fabs(centre) > 2 * S ? std::round(centre / S) * S : 0.0;
+  }
+  return {static_cast<float>(o[0]), static_cast<float>(o[1]), static_cast<float>(o[2])};
+}
+
 Vec3 local_origin(const float* P, size_t n, int threads) {
   const float inf = std::numeric_limits<float>::infinity();
   float lx = inf, ly = inf, lz = inf, hx = -inf, hy = -inf, hz = -inf;
@@ -125,17 +140,8 @@ Vec3 local_origin(const float* P, size_t n, int threads) {
     ly = std::min(ly, y), hy = std::max(hy, y);
     lz = std::min(lz, z), hz = std::max(hz, z);
   }
-  if (!(lx <= hx)) return {};
-  const double lo[3] = {lx, ly, lz}, hi[3] = {hx, hy, hz};
-  double extent = 0;
-  for (int a = 0; a < 3; ++a) extent = std::max(extent, hi[a] - lo[a]);
-  const double S = std::exp2(std::ceil(std::log2(std::max(extent, 1e-6))));
-  double o[3];
-  for (int a = 0; a < 3; ++a) {
-    const double centre = 0.5 * (lo[a] + hi[a]);
-    o[a] = std::fabs(centre) > 2 * S ? std::round(centre / S) * S : 0.0;
-  }
-  return {static_cast<float>(o[0]), static_cast<float>(o[1]), static_cast<float>(o[2])};
+  const float lo[3] = {lx, ly, lz}, hi[3] = {hx, hy, hz};
+  return box_origin(lo, hi);
 }
 
 }  // namespace
@@ -443,6 +449,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
   if (o.owner) o.owner->sync_device();
   device.reset();
   holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
+  end_there = end_P_stale = end_v_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -460,6 +467,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   device = std::move(o.device);
   holds_contacts = o.holds_contacts;
   stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
+  end_there = end_P_stale = end_v_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -513,7 +521,30 @@ void GrainsSolver::sync_rows_p() const {
   self.device_.rows_p_stale = false;
 }
 
+void GrainsSolver::sync_end(bool positions, bool velocities) const {
+  positions = positions && device_.end_P_stale;
+  velocities = velocities && device_.end_v_stale;
+  if (!positions && !velocities) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  if (!self.device_.device->fetch_end(positions ? self.end_P_.data() : nullptr,
+                                      velocities ? self.end_v_.data() : nullptr, end_P_.size() / 3))
+    throw std::logic_error("grains: the device no longer holds the end it kept");
+  if (positions) self.device_.end_P_stale = false;
+  if (velocities) self.device_.end_v_stale = false;
+}
+
+const float* GrainsSolver::end_positions() {
+  sync_end(true, false);
+  return end_P_.data();
+}
+
+const float* GrainsSolver::end_velocities() {
+  sync_end(false, true);
+  return end_v_.data();
+}
+
 void GrainsSolver::sync_device() const {
+  sync_end(true, true);
   sync_rows();
   sync_rows_p();
   sync_planes();
@@ -527,9 +558,14 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = p_made_ = false;
   plane_rows_there_ = planes_same_ = false;
   written_on_device_ = nullptr;
-  finished_there_ = collided_there_ = carried_ = false;
+  finished_there_ = collided_there_ = carried_ = end_stays_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
+  // a start held on the device: the end the last substep left there (GrainsData::start_held)
+  start_held_ = d.start_held;
+  if (start_held_ && !(device_.end_there && d.n == n_))
+    throw std::logic_error("grains: a substep starts from an end the device does not hold");
+  device_.end_there = false;
   // the device's calls of this substep may share the arrays bind_inputs makes, which hold their
   // values until the next
   if (device_.device) device_.device->begin_substep();
@@ -597,6 +633,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // 5. strain, breaking, strands
   if (c.constraints_on) update_constraints(d, s, c.threads, stats);
+  if (start_held_) ++held_starts_;  // and no stage brought its start here
 
   // stats: serial, in a fixed order
   if (stats && c.pairs_on) contact_stats(d, stats);
@@ -614,7 +651,10 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   const int threads = c.threads;
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
-  const Vec3 origin = local_origin(d.P, n, threads);
+  // a start held on the device stays there where every stage takes it there; its origin is the
+  // one its box, measured there, gives
+  if (start_held_ && !start_stays(d, s, c.colliders, c.collider_count)) fetch_start(c);
+  const Vec3 origin = start_held_ ? end_origin_ : local_origin(d.P, n, threads);
   c.origin = origin;
   const bool shifted = !(origin.x == 0 && origin.y == 0 && origin.z == 0);
   prm.shock_origin_x -= origin.x;
@@ -631,8 +671,10 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   };
   if (shifted || c.constraints_on) {
     P0_copy_.resize(3 * n);
+    if (!start_held_) {
 #pragma omp parallel for schedule(static) num_threads(threads)
-    for (long i = 0; i < ln; ++i) store3(P0_copy_.data(), i, load3(d.P, i) - origin);
+      for (long i = 0; i < ln; ++i) store3(P0_copy_.data(), i, load3(d.P, i) - origin);
+    }
     P0_ = P0_copy_.data();
   } else {
     drop(P0_copy_);
@@ -732,9 +774,17 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
 void GrainsSolver::carry_start(const SubstepContext& c) {
   const GrainsSettings& s = c.s;
   const size_t n = n_;
+  const float origin[3] = {c.origin.x, c.origin.y, c.origin.z};
+  if (start_held_) {  // every grain is what the end there wrote (start_stays)
+    carry_changed_.clear();
+    carried_ = device_.device->carry_start(P0_, c.d.v, n, origin, carry_changed_);
+    if (!carried_) throw std::logic_error("grains: the device holds no end to start from");
+    return;
+  }
   if (!s.use_opencl || s.resend_start || s.contact_solver != kContactGaussSeidel ||
       !device_.device || end_P_.size() != 3 * n)
     return;
+  sync_end(true, true);  // an end held there that its holder did not take up
   const float* v = end_v_.size() == 3 * n ? c.d.v : nullptr;
   const long ln = static_cast<long>(n);
   carry_differs_.resize(n);
@@ -749,8 +799,33 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
   for (size_t i = 0; i < n && carry_changed_.size() <= n / 4; ++i)
     if (carry_differs_[i]) carry_changed_.push_back(static_cast<gr_uint>(i));
   if (carry_changed_.size() > n / 4) return;
-  const float origin[3] = {c.origin.x, c.origin.y, c.origin.z};
   carried_ = device_.device->carry_start(P0_, v, n, origin, carry_changed_);
+}
+
+// A start held on the device (GrainsData::start_held) stays there where no stage reads the start
+// here: the device predicts (GrainsSolver::predict), finds the planes (no mesh collider) and
+// solves; no global mass shock, constraint or shape reads the start positions, and the velocity
+// is not kept. A stage that reads it anyway (the host's search of rows, host_p) brings it then.
+bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
+                               const ColliderState* colliders, size_t collider_count) const {
+  return s.use_opencl && s.contact_solver == kContactGaussSeidel && !s.resend_start &&
+         !s.keep_velocity && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
+         !any_mesh(colliders, collider_count);
+}
+
+// the held start into d.P and d.v (world) and, once bind_inputs has set it, P0_ (the substep's
+// coordinates); the device's own start, made from the same floats, stays as it is
+void GrainsSolver::fetch_start(const SubstepContext& c) {
+  const size_t n = n_;
+  sync_end(true, true);
+  std::copy_n(end_P_.data(), 3 * n, c.d.P);
+  std::copy_n(end_v_.data(), 3 * n, c.d.v);
+  if (P0_ == P0_copy_.data() && P0_copy_.size() == 3 * n) {
+    const long ln = static_cast<long>(n);
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+    for (long i = 0; i < ln; ++i) store3(P0_copy_.data(), i, load3(c.d.P, i) - c.origin);
+  }
+  start_held_ = false;
 }
 
 // step 1: each grain's predicted position p_ (gr_predict). With use_opencl and gauss_seidel the
@@ -777,6 +852,7 @@ void GrainsSolver::predict(SubstepContext& c) {
 
 float* GrainsSolver::host_p(const SubstepContext& c) {
   if (p_made_) return p_.data();
+  if (start_held_) fetch_start(c);  // its start, here
   const long ln = static_cast<long>(n_);
 #pragma omp parallel for schedule(static) num_threads(c.threads)
   for (long i = 0; i < ln; ++i) gr_predict(&c.g, &c.prm, p_.data(), static_cast<int>(i));
@@ -1282,6 +1358,23 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
                               size_t collider_count, const Vec3& origin, bool impacts,
                               int threads) {
   if (impacts) sync_planes();
+  // the device's end stays there when every position and velocity it wrote is finite (else
+  // they come back, for the engine's check to name the grain), measured there with the box
+  // that gives the next substep's origin
+  if (finished_there_ && end_stays_) {
+    float lo[3], hi[3];
+    bool finite = false;
+    if (device_.device->end_bounds(d.n, lo, hi, &finite) && finite) {
+      device_.end_there = device_.end_P_stale = device_.end_v_stale = true;
+      end_origin_ = box_origin(lo, hi);
+      ++held_ends_;
+      finish_P_ = d.P;
+      end_changed_.clear();
+      end_hit_.clear();
+      return;
+    }
+    device_.device->fetch_end(end_P_.data(), end_v_.data(), d.n);
+  }
   const long ln = static_cast<long>(d.n);
   const bool colliders_on = collider_count > 0;
   const float* p = p_.data();
@@ -1388,6 +1481,10 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
     written_on_device_ = d.P;
   } else {
     sync_rows();
+    if (device_.end_there) {  // the end held there, here
+      sync_end(true, false);
+      std::copy_n(end_P_.data(), 3 * n, d.P);
+    }
     gr_row_overlaps(d.P, radius_, neighbors_.offsets.data(), neighbors_.indices.data(), 0,
                     static_cast<int>(n), &contacts, &largest, &sum);
   }

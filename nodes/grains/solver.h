@@ -128,6 +128,12 @@ struct GrainsData {
   const float* targetP = nullptr;          // (n x 3) m; nullptr with targetstiffness: origin
   const float* targetweight = nullptr;     // (n) optional
   const float* targetstiffness = nullptr;  // (n) nullptr: no pins
+  // use_opencl with gauss_seidel: the substep's end may stay on the device (may_hold_end; the
+  // caller then reads P and v only through GrainsSolver::end_positions and end_velocities, or
+  // starts the next substep from there), and the substep starts from such an end (start_held:
+  // P and v are not read, only written)
+  bool may_hold_end = false;
+  bool start_held = false;
   // rigid shape matching: its connectivity is the 2-point primitives above (prim_points), dead
   // ones included until they are removed
   // collider contacts, out (impact data, collision feedback); all set or all nullptr. Each grain
@@ -217,6 +223,19 @@ class GrainsSolver {
   // whether the last substep's start was made on the device from the end before (carry_start),
   // and how many grains went up for it
   bool carried_start() const { return carried_; }
+  // use_opencl: whether the last substep's end stayed on the device (GrainsData::may_hold_end),
+  // its positions and velocities not brought back, every one finite (measured there, with the
+  // box that gives the next substep's origin); the next substep may start from it
+  // (GrainsData::start_held)
+  bool end_held() const { return device_.end_there; }
+  // that end's world positions and velocities (n x 3), each brought back at its first call;
+  // valid until the next substep
+  const float* end_positions();
+  const float* end_velocities();
+  // the substeps so far that ended there (end_held), and those that started from such an end
+  // and never brought it here (fetch_start)
+  size_t held_ends() const { return held_ends_; }
+  size_t held_starts() const { return held_starts_; }
   // whether the device made the last substep's predicted positions (predict)
   bool predicted_on_device() const { return predicted_there_; }
   // the substeps so far in which the host made the predicted positions too (host_p: a stage
@@ -324,6 +343,9 @@ class GrainsSolver {
     // rows_p_ (the positions the kept rows were built from) is the device's: the search there
     // took them, and its Verlet test reads them there (keep_rows)
     bool rows_p_stale = false;
+    // the last end stayed there (end_held()); end_P_ and end_v_ are the device's until brought
+    // back (end_positions(), end_velocities())
+    bool end_there = false, end_P_stale = false, end_v_stale = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -360,6 +382,17 @@ class GrainsSolver {
   // whose host values differ (carry_changed_), which go up alone; carried_: it was
   void carry_start(const SubstepContext& c);
   bool carried_ = false;
+  // this substep's start is the end the device held (GrainsData::start_held), which d.P and
+  // d.v do not hold: start_stays() says whether every stage reads it there, fetch_start()
+  // brings it into d.P and d.v (and P0_) for one that does not; end_origin_: the origin the
+  // held end's box gives (local_origin's); end_stays_: the device's end of this substep stays
+  // there (SequentialSolve::Finish::stay), which write_back keeps when every grain is finite
+  bool start_held_ = false, end_stays_ = false;
+  Vec3 end_origin_;
+  size_t held_ends_ = 0, held_starts_ = 0;
+  bool start_stays(const GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
+                   size_t collider_count) const;
+  void fetch_start(const SubstepContext& c);
   std::vector<uint8_t> carry_differs_;
   std::vector<gr_uint> carry_changed_;
   const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
@@ -385,6 +418,7 @@ class GrainsSolver {
   void sync_rows() const;
   void sync_rows_p() const;
   void sync_planes() const;
+  void sync_end(bool positions, bool velocities) const;  // end_P_, end_v_ (DeviceSlot)
   void sync_device() const;
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;

@@ -181,6 +181,10 @@ struct Iterations::Impl {
   // (in end_v, which only the end writes)
   cl_kernel carry = nullptr;
   Buffer carry_P;
+  // what the last end there wrote, measured there (Iterations::end_bounds): the kernel, each
+  // work-item's box and flag
+  cl_kernel end_bounds = nullptr;
+  Buffer end_part;
   size_t carry_n = 0, carry_v_n = 0;
   // the substep's predicted positions made there (Iterations::predict, gr_k_predict), which the
   // search of rows or planes and the solve take
@@ -225,7 +229,7 @@ struct Iterations::Impl {
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
-                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P,
+                      &force, &end_v, &patch_index, &patch_values, &start, &carry_P, &end_part,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
@@ -236,7 +240,7 @@ struct Iterations::Impl {
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
                         finish, scatter3, final_collision, carry, predict, plane_same,
-                        rows_moved})
+                        rows_moved, end_bounds})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

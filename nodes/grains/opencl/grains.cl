@@ -310,6 +310,31 @@ __kernel void gr_k_carry(__global const float* end_P, float origin_x, float orig
   }
 }
 
+/* gr_k_end_bounds: over the grains w, w + items, ... of what the end wrote (P, world, and v),
+ * the box of the positions whose three coordinates are finite (as solver.cpp's local_origin
+ * takes it) and whether a position or a velocity is not: part[7 w ...] = lo, hi, 0 or 1 */
+__kernel void gr_k_end_bounds(__global const float* P, __global const float* v, int n,
+                              __global float* part) {
+  const int w = (int)get_global_id(0), items = (int)get_global_size(0);
+  float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  float bad = 0.0f;
+  int i, a;
+  for (i = w; i < n; i += items) {
+    if (isfinite(P[3 * i]) && isfinite(P[3 * i + 1]) && isfinite(P[3 * i + 2])) {
+      for (a = 0; a < 3; ++a) {
+        const float x = P[3 * i + a];
+        lo[a] = x < lo[a] ? x : lo[a];
+        hi[a] = x > hi[a] ? x : hi[a];
+      }
+    } else {
+      bad = 1.0f;
+    }
+    if (!(isfinite(v[3 * i]) && isfinite(v[3 * i + 1]) && isfinite(v[3 * i + 2]))) bad = 1.0f;
+  }
+  for (a = 0; a < 3; ++a) part[7 * w + a] = lo[a], part[7 * w + 3 + a] = hi[a];
+  part[7 * w + 6] = bad;
+}
+
 /* the grains index[k] of P take the positions values[k] (3 floats each), k < count */
 __kernel void gr_k_scatter3(__global float* P, __global const gr_uint* index,
                             __global const float* values, int count) {

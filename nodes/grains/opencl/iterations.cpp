@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -137,6 +138,38 @@ bool Iterations::carry_start(const float* P, const float* v, size_t n, const flo
   if (v) m.patch(m.velocity, v, changed, true, 1);
   m.copied_once(start, P, 3 * n * f);
   if (v) m.copied_once(m.velocity, v, 3 * n * f);
+  return true;
+}
+
+bool Iterations::end_bounds(size_t n, float lo[3], float hi[3], bool* finite) {
+  Impl& m = *impl_;
+  if (n == 0 || m.carry_n != n || m.carry_v_n != n) return false;
+  // a work-item a 64 grains, in whole work-groups, at most 16 of them: 28 bytes each
+  const size_t items = std::min(16 * kGroup, ((n + 63) / 64 + kGroup - 1) / kGroup * kGroup);
+  m.end_part.reserve(m.ctx, 7 * items * sizeof(float), m.largest);
+  cl_kernel k = m.kernel(m.end_bounds, "gr_k_end_bounds");
+  const int count = static_cast<int>(n);
+  arg(k, 0, m.carry_P), arg(k, 1, m.end_v), arg(k, 2, count), arg(k, 3, m.end_part);
+  m.launch(k, items);
+  std::vector<float> part(7 * items);
+  m.download(m.end_part, part.data(), part.size() * sizeof(float));
+  const float inf = std::numeric_limits<float>::infinity();
+  *finite = true;
+  for (int a = 0; a < 3; ++a) lo[a] = inf, hi[a] = -inf;
+  // the smallest and the largest, in any order the same
+  for (size_t w = 0; w < items; ++w) {
+    for (int a = 0; a < 3; ++a)
+      lo[a] = std::min(lo[a], part[7 * w + a]), hi[a] = std::max(hi[a], part[7 * w + 3 + a]);
+    if (part[7 * w + 6] != 0.0f) *finite = false;
+  }
+  return true;
+}
+
+bool Iterations::fetch_end(float* P, float* v, size_t n) {
+  Impl& m = *impl_;
+  if (m.carry_n != n || (v && m.carry_v_n != n)) return false;
+  m.download(m.carry_P, P, 3 * n * sizeof(float));
+  m.download(m.end_v, v, 3 * n * sizeof(float));
   return true;
 }
 
@@ -746,8 +779,10 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
           "clEnqueueCopyBuffer");
     m.carry_n = n;
     m.carry_v_n = end->v_out ? n : 0;
-    m.download(m.stats_P, end->P_out, 3 * n * f);
-    m.download(m.end_v, end->v_out, 3 * n * f);
+    if (!end->stay) {
+      m.download(m.stats_P, end->P_out, 3 * n * f);
+      m.download(m.end_v, end->v_out, 3 * n * f);
+    }
   } else {
     m.download(*result, p, 3 * n * f);
     if (w.x) m.download(m.stable, w.x, 3 * n * f);

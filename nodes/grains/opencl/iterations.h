@@ -122,6 +122,9 @@ struct SequentialSolve {
     float origin[3] = {0.0f, 0.0f, 0.0f};
     const gr_collider* colliders = nullptr;
     size_t collider_count = 0;
+    // what it wrote stays there, P_out and v_out unwritten until fetch_end() brings them (v_out
+    // still says whether the velocities are written)
+    bool stay = false;
   };
   const Finish* finish = nullptr;
 };
@@ -294,6 +297,14 @@ class Iterations {
   // velocities and v is asked for).
   bool carry_start(const float* P, const float* v, size_t n, const float origin[3],
                    const std::vector<gr_uint>& changed);
+  // What the last end there wrote, of n grains, measured there: the box of its positions
+  // whose coordinates are all finite (lo > hi: none) and whether every position and velocity
+  // is finite (7 floats a work-item come back). False, with nothing done, when that end was not
+  // of n grains or wrote no velocities.
+  bool end_bounds(size_t n, float lo[3], float hi[3], bool* finite);
+  // what the last end there wrote (world positions into P, velocities into v; either null),
+  // brought back; false when that end was not of n grains (or wrote no velocities, v asked for)
+  bool fetch_end(float* P, float* v, size_t n);
   // what has crossed between the host and the device since it was opened
   Traffic traffic() const;
 

@@ -86,6 +86,7 @@ struct Scene {
   float time = 0;
   GrainsStats stats;
   bool with_stats = true;  // the solver gives stats (error control's overlap statistics)
+  bool hold_end = false;   // GrainsData::may_hold_end and start_held (substep())
   std::vector<uint8_t> dead;
 
   size_t size() const { return mass.size(); }
@@ -161,6 +162,10 @@ struct Scene {
       }
     }
     GrainsData d = data();
+    // use_opencl: the end may stay on the device, and a held end is the next start (P and v
+    // are then not read; the caller brings them back through the solver)
+    d.may_hold_end = hold_end;
+    d.start_held = hold_end && solver.end_held();
     solver.substep(d, s, colliders.data(), colliders.size(), with_stats ? &stats : nullptr);
     remove_dead();
     time += s.dt;

@@ -387,6 +387,14 @@ double Expression::eval(const ExprVars& vars) { return impl_->eval(vars); }
 
 const std::string& Expression::text() const { return impl_->text; }
 
+bool Expression::uses(const std::string& name) const {
+  try {
+    return impl_->parser.GetUsedVar().count(name) != 0;
+  } catch (const mu::Parser::exception_type&) {
+    return true;  // parsed at construction: not reached; a read assumed
+  }
+}
+
 // ---- keyframes ----
 
 double Keyframes::eval(double t) const {

@@ -57,6 +57,8 @@ class Expression {
   Expression& operator=(Expression&&) noexcept;
   double eval(const ExprVars& vars);
   const std::string& text() const;
+  // whether the text reads the variable written `name` (a bound one: "TX", "$TX", "@mass")
+  bool uses(const std::string& name) const;
 
  private:
   struct Impl;

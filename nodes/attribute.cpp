@@ -101,6 +101,9 @@ struct Compiled {
   std::unique_ptr<double[]> slots;    // kPointVars, then one per @name
   std::vector<AtSource> at_sources;   // per @name, in slot order after kPointVars
   std::vector<Expression> exprs;      // 1 or 3
+  // whether they read the positions ($TX $TY $TZ) and the velocities ($VX $VY $VZ): the store's
+  // arrays are taken only then (a grains node may hold them: engine/particles.h)
+  bool reads_P = false, reads_v = false;
 };
 
 // Compiles `text` (1 or `count` expressions) with the point variables bound to fresh slots and
@@ -135,6 +138,14 @@ Compiled compile(const std::string& text, size_t count, const ParticleStore* sou
     c.at_sources.push_back(src);
   }
   for (const std::string& part : parts) c.exprs.emplace_back(part, channel_names, bound);
+  auto reads = [&](size_t first) {
+    for (const Expression& e : c.exprs)
+      for (size_t k = first; k < first + 3; ++k)
+        if (e.uses(kPointVars[k]) || e.uses(std::string("$") + kPointVars[k])) return true;
+    return false;
+  };
+  c.reads_P = reads(5);  // TX TY TZ
+  c.reads_v = reads(8);  // VX VY VZ
   return c;
 }
 
@@ -168,8 +179,8 @@ class AttributeNode : public Node {
     const std::string group = p.group.empty() ? std::string() : group_attribute(p.group);
     const int32_t* in_group = group.empty() ? nullptr : s.i_if(group);
     if (!group.empty() && !in_group) return;  // no point is in the group yet
-    const float* P = s.v3_if("P");
-    const float* v = s.v3_if("v");
+    const float* P = compiled_.reads_P ? s.v3_if("P") : nullptr;
+    const float* v = compiled_.reads_v ? s.v3_if("v") : nullptr;
     const float* age = s.f_if("age");
     const float* life = s.f_if("life");
     const int32_t* id = s.i_if("id");

@@ -306,3 +306,20 @@ TEST_CASE("channels evaluate constants, expressions and keyframes", "[channel]")
   CHECK(target.eval(v) == Approx(1.75));
   CHECK(target.text() == "ST + activation");
 }
+
+TEST_CASE("an expression says which bound variables it reads", "[expression]") {
+  // the attribute node takes the positions and velocities only for an expression that reads
+  // them (a grains node may hold them elsewhere: engine/particles.h)
+  double tx = 0, vx = 0;
+  const std::vector<std::pair<std::string, double*>> bound = {
+      {"TX", &tx}, {"$TX", &tx}, {"VX", &vx}, {"$VX", &vx}};
+  const Expression reads("$TX * 2 + if($F > 3, VX, 0)", {}, bound);
+  CHECK(reads.uses("$TX"));
+  CHECK_FALSE(reads.uses("TX"));
+  CHECK(reads.uses("VX"));
+  CHECK_FALSE(reads.uses("$VX"));
+  const Expression none("strcmp($OBJNAME, \"sand\") + $F", {}, bound);
+  CHECK_FALSE(none.uses("TX"));
+  CHECK_FALSE(none.uses("$TX"));
+  CHECK_FALSE(none.uses("VX"));
+}

@@ -19,9 +19,9 @@ namespace {
 // 1,000 grains of 1 cm dropped in a bin 30 cm wide, its floor at height 0 and its centre
 // `far` from the world's origin along x and z, 4 substeps a frame (or error control's), with
 // use_opencl and no sleeping (whose test reads the positions every substep). With `probe` an
-// attribute node after the grains node reads every grain's position each substep, which
-// brings them back each time.
-Graph bin_graph(bool probe, bool error_control, float far) {
+// attribute node after the grains node sets the attribute "probe" to that expression each
+// substep: "$TX" reads every grain's position, which brings them back each time.
+Graph bin_graph(const char* probe, bool error_control, float far) {
   auto plane = [&](const char* name, json normal, json at) {
     return json{{"name", name},
                 {"type", "collider"},
@@ -56,7 +56,7 @@ Graph bin_graph(bool probe, bool error_control, float far) {
     nodes.push_back({{"name", "probe"},
                      {"type", "attribute"},
                      {"inputs", {"grains"}},
-                     {"params", {{"attribute", "probe"}, {"value", "$TX"}}}});
+                     {"params", {{"attribute", "probe"}, {"value", probe}}}});
     last = "probe";
   }
   nodes.push_back({{"name", "solver"},
@@ -88,7 +88,8 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
   // The bin's 8 frames (the grains fall, land and pile), with and without the probe, without
   // and with error control, at the world's origin and 96 m from it (the substep's origin,
   // which a held start takes from the box the device measured, is then not 0): the same
-  // positions and velocities after every frame, bit for bit. Without the probe every substep
+  // positions and velocities after every frame, bit for bit. Without the probe, or with one
+  // that reads no position or velocity ($ID x 2), every substep
   // but a frame's first (where the node sorts its grains again) starts from the end held
   // there, and the 24 bytes a grain of each such end do not come back; with error control,
   // which reads the velocities after each substep to pick the next frame's count, only the
@@ -97,18 +98,25 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
   for (const bool control : {false, true})
     for (const float far : {0.0f, 96.0f}) {
       INFO("error control " << control << ", " << far << " m from the origin");
-      Simulation held(bin_graph(false, control, far), 1), probed(bin_graph(true, control, far), 1);
+      Simulation held(bin_graph(nullptr, control, far), 1),
+          probed(bin_graph("$TX", control, far), 1), tagged(bin_graph("$ID * 2", control, far), 1);
       int substeps = 0;
       for (int f = 0; f < 8; ++f) {
         held.step_frame();
         probed.step_frame();
+        tagged.step_frame();
         INFO("frame " << f + 1);
         REQUIRE(held.object(0).pts.size() == 1000);
         CHECK(array(held, "P") == array(probed, "P"));
         CHECK(array(held, "v") == array(probed, "v"));
+        CHECK(array(held, "P") == array(tagged, "P"));
         CHECK(held.object(0).stats.substeps == probed.object(0).stats.substeps);
         substeps += held.object(0).stats.substeps;
       }
+      REQUIRE(solver_of(tagged));
+      CHECK(solver_of(tagged)->held_starts() == solver_of(held)->held_starts());
+      CHECK(tagged.object(0).pts.f_if("probe")[7] ==
+            2.0f * float(tagged.object(0).pts.i_if("id")[7]));
       REQUIRE(solver_of(held));
       REQUIRE(solver_of(probed));
       const GrainsSolver& h = *solver_of(held);

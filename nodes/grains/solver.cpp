@@ -768,9 +768,10 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
 // (the world positions less this substep's origin, the subtraction bind_inputs makes) and only
 // the grains that differ go up, instead of every grain's start position and velocity (24 bytes
 // a grain). Exact: a grain is taken from there only when its host floats are the ones the device
-// holds, so the substep is the same bits either way. Not past a quarter of the grains differing
-// (a frame's first substep, whose grains the node sorts again): their 28 bytes each would cost
-// more than sending all.
+// holds, so the substep is the same bits either way. Grains in another order (a frame's first
+// substep, whose grains the node sorts again by cell), or born or killed since, are found in
+// the end by their ids, and each grain's index there goes up (4 bytes a grain). Not past a
+// quarter of the grains differing: their 28 bytes each would cost more than sending all.
 void GrainsSolver::carry_start(const SubstepContext& c) {
   const GrainsSettings& s = c.s;
   const size_t n = n_;
@@ -782,24 +783,62 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
     return;
   }
   if (!s.use_opencl || s.resend_start || s.contact_solver != kContactGaussSeidel ||
-      !device_.device || end_P_.size() != 3 * n)
+      !device_.device || end_P_.empty())
     return;
+  const size_t m = end_P_.size() / 3;  // the last end's grains
+  // in the end's order (the same ids, or as many grains where either has no ids), or found in
+  // it by id (carry_from_: a frame's first substep, whose grains the node sorts again by cell,
+  // or grains born or killed since)
+  const bool by_id = c.d.id && end_ids_.size() == m;
+  const bool same = by_id ? m == n && std::equal(end_ids_.begin(), end_ids_.end(), c.d.id) : m == n;
+  if (!same && !by_id) return;
+  if (!same) find_in_end(c.d.id, n);
   sync_end(true, true);  // an end held there that its holder did not take up
-  const float* v = end_v_.size() == 3 * n ? c.d.v : nullptr;
+  const float* v = end_v_.size() == 3 * m ? c.d.v : nullptr;
   const long ln = static_cast<long>(n);
   carry_differs_.resize(n);
   const float* P = c.d.P;
+  const gr_uint* from = same ? nullptr : carry_from_.data();
 #pragma omp parallel for schedule(static) num_threads(c.threads)
   for (long i = 0; i < ln; ++i) {
-    const size_t at = 3 * size_t(i);
-    carry_differs_[i] = std::memcmp(P + at, &end_P_[at], 3 * sizeof(float)) != 0 ||
-                        (v && std::memcmp(v + at, &end_v_[at], 3 * sizeof(float)) != 0);
+    const gr_uint j = from ? from[i] : static_cast<gr_uint>(i);
+    const size_t at = 3 * size_t(i), end_at = 3 * size_t(j);
+    carry_differs_[i] = j == kNotInEnd ||
+                        std::memcmp(P + at, &end_P_[end_at], 3 * sizeof(float)) != 0 ||
+                        (v && std::memcmp(v + at, &end_v_[end_at], 3 * sizeof(float)) != 0);
   }
   carry_changed_.clear();
   for (size_t i = 0; i < n && carry_changed_.size() <= n / 4; ++i)
     if (carry_differs_[i]) carry_changed_.push_back(static_cast<gr_uint>(i));
   if (carry_changed_.size() > n / 4) return;
-  carried_ = device_.device->carry_start(P0_, v, n, origin, carry_changed_);
+  carried_ =
+      device_.device->carry_start(P0_, v, n, origin, carry_changed_, from ? &carry_from_ : nullptr);
+}
+
+// carry_from_: each of the n grains' index in the last end, found by its id (kNotInEnd: none);
+// through a table over the ids' range where it is at most 4 times the grains, else by sorting
+void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
+  const size_t m = end_ids_.size();
+  carry_from_.assign(n, kNotInEnd);
+  const auto [lo, hi] = std::minmax_element(end_ids_.begin(), end_ids_.end());
+  const int64_t first = *lo, span = int64_t(*hi) - first + 1;
+  if (span <= 4 * int64_t(std::max(m, n))) {
+    std::vector<gr_uint>& at = carry_at_;
+    at.assign(static_cast<size_t>(span), kNotInEnd);
+    for (size_t j = 0; j < m; ++j) at[size_t(end_ids_[j] - first)] = static_cast<gr_uint>(j);
+    for (size_t i = 0; i < n; ++i) {
+      const int64_t k = int64_t(id[i]) - first;
+      if (k >= 0 && k < span) carry_from_[i] = at[size_t(k)];
+    }
+    return;
+  }
+  std::vector<std::pair<int32_t, gr_uint>> sorted(m);
+  for (size_t j = 0; j < m; ++j) sorted[j] = {end_ids_[j], static_cast<gr_uint>(j)};
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t i = 0; i < n; ++i) {
+    auto it = std::lower_bound(sorted.begin(), sorted.end(), std::pair<int32_t, gr_uint>{id[i], 0});
+    if (it != sorted.end() && it->first == id[i]) carry_from_[i] = it->second;
+  }
 }
 
 // A start held on the device (GrainsData::start_held) stays there where no stage reads the start
@@ -1358,6 +1397,13 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
                               size_t collider_count, const Vec3& origin, bool impacts,
                               int threads) {
   if (impacts) sync_planes();
+  // the ids of the grains the device's end wrote, in its order (carry_start finds them there)
+  if (finished_there_) {
+    if (d.id)
+      end_ids_.assign(d.id, d.id + d.n);
+    else
+      end_ids_.clear();
+  }
   // the device's end stays there when every position and velocity it wrote is finite (else
   // they come back, for the engine's check to name the grain), measured there with the box
   // that gives the next substep's origin

@@ -395,6 +395,12 @@ class GrainsSolver {
   void fetch_start(const SubstepContext& c);
   std::vector<uint8_t> carry_differs_;
   std::vector<gr_uint> carry_changed_;
+  // the ids of the grains the last end there wrote (its order), and each grain's index there
+  // when the grains come in another order (find_in_end; kNotInEnd: not there), with its table
+  static constexpr gr_uint kNotInEnd = 0xffffffffu;
+  std::vector<int32_t> end_ids_;
+  std::vector<gr_uint> carry_from_, carry_at_;
+  void find_in_end(const int32_t* id, size_t n);
   const float* finish_P_ = nullptr;  // the written positions' array (d.P) write_back filled
   // g's force as the device reads it (its prediction and end; SubstepContext::device_force):
   // null (none), one row that every grain reads (*uniform), else a copy of each grain's row

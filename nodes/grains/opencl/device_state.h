@@ -180,7 +180,7 @@ struct Iterations::Impl {
   // the world positions of carry_n grains (0: none) and, for carry_v_n grains, the velocities
   // (in end_v, which only the end writes)
   cl_kernel carry = nullptr;
-  Buffer carry_P;
+  Buffer carry_P, carry_from;  // carry_from: each grain's index in that end (a new order)
   // what the last end there wrote, measured there (Iterations::end_bounds): the kernel, each
   // work-item's box and flag
   cl_kernel end_bounds = nullptr;
@@ -230,6 +230,7 @@ struct Iterations::Impl {
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
                       &force, &end_v, &patch_index, &patch_values, &start, &carry_P, &end_part,
+                      &carry_from,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,

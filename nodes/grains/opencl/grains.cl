@@ -296,17 +296,20 @@ __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
  * has (the contact loop's block loads); the velocities end_v into v (null: not carried). */
 __kernel void gr_k_carry(__global const float* end_P, float origin_x, float origin_y,
                          float origin_z, __global float* P, __global const float* end_v,
-                         __global float* v, int n) {
+                         __global float* v, int n, __global const gr_uint* from) {
   const int i = (int)get_global_id(0);
   if (i >= n) return;
   if (i == 0) P[3 * n] = 0.0f;
-  P[3 * i] = end_P[3 * i] - origin_x;
-  P[3 * i + 1] = end_P[3 * i + 1] - origin_y;
-  P[3 * i + 2] = end_P[3 * i + 2] - origin_z;
+  /* grain i was grain from[i] of the last end (none: 0xffffffff, sent alone), or grain i */
+  const gr_uint j = from ? from[i] : (gr_uint)i;
+  if (j == 0xffffffffu) return;
+  P[3 * i] = end_P[3 * j] - origin_x;
+  P[3 * i + 1] = end_P[3 * j + 1] - origin_y;
+  P[3 * i + 2] = end_P[3 * j + 2] - origin_z;
   if (v) {
-    v[3 * i] = end_v[3 * i];
-    v[3 * i + 1] = end_v[3 * i + 1];
-    v[3 * i + 2] = end_v[3 * i + 2];
+    v[3 * i] = end_v[3 * j];
+    v[3 * i + 1] = end_v[3 * j + 1];
+    v[3 * i + 2] = end_v[3 * j + 2];
   }
 }
 

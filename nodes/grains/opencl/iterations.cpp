@@ -119,9 +119,12 @@ void Iterations::begin_substep() {
 }
 
 bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
-                             const std::vector<gr_uint>& changed) {
+                             const std::vector<gr_uint>& changed,
+                             const std::vector<gr_uint>* from) {
   Impl& m = *impl_;
-  if (n == 0 || m.carry_n != n || (v && m.carry_v_n != n)) return false;
+  if (n == 0 || m.carry_n == 0 || (from ? from->size() != n : m.carry_n != n) ||
+      (v && m.carry_v_n != m.carry_n))
+    return false;
   const size_t f = sizeof(float);
   Buffer& start = m.arrays[kP];
   start.reserve(m.ctx, (3 * n + 1) * f, m.largest);  // and the zero past the last grain
@@ -133,6 +136,8 @@ bool Iterations::carry_start(const float* P, const float* v, size_t n, const flo
   arg(k, 4, start), arg(k, 7, count);
   set_buffer(k, 5, v ? &m.end_v : nullptr);
   set_buffer(k, 6, v ? &m.velocity : nullptr);
+  if (from) m.upload(m.carry_from, from->data(), n * sizeof(gr_uint));
+  set_buffer(k, 8, from ? &m.carry_from : nullptr);
   m.launch(k, n);
   m.patch(start, P, changed, false, 0);
   if (v) m.patch(m.velocity, v, changed, true, 1);

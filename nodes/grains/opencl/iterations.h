@@ -293,10 +293,12 @@ class Iterations {
   // positions less `origin` (as the host subtracts it) and its velocities, but for the grains
   // `changed` lists, whose host values differ from those and go up alone (16 bytes a grain for
   // the positions, 12 more for the velocities). From then on this substep's calls take P and v
-  // as sent. False, with nothing done, when the last end there was not of n grains (or wrote no
-  // velocities and v is asked for).
+  // as sent. With `from`, the grains are in another order, or others: grain i was grain
+  // from[i] of the last end (0xffffffff: none, and in `changed`), and `from` goes up (4 bytes a
+  // grain). False, with nothing done, when the last end there was not of n grains (without
+  // `from`) or wrote no velocities and v is asked for.
   bool carry_start(const float* P, const float* v, size_t n, const float origin[3],
-                   const std::vector<gr_uint>& changed);
+                   const std::vector<gr_uint>& changed, const std::vector<gr_uint>* from = nullptr);
   // What the last end there wrote, of n grains, measured there: the box of its positions
   // whose coordinates are all finite (lo > hi: none) and whether every position and velocity
   // is finite (7 floats a work-item come back). False, with nothing done, when that end was not

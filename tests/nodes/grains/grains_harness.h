@@ -69,6 +69,7 @@ inline ColliderState box(const Vec3& centre, const Vec3& size) {
 struct Scene {
   std::vector<float> P, v, force, mass, pscale, shockmass;
   std::vector<float> friction;  // optional, empty = missing
+  std::vector<int32_t> ids;     // optional (GrainsData::id), empty = missing
   // explicit constraints: (m x 2) grain indices with per-primitive attributes; primitives the
   // solver marks dead (broken, strands) are removed after each substep, as the node does
   std::vector<int32_t> prims;
@@ -131,6 +132,7 @@ struct Scene {
     d.pscale = pscale.data();
     d.friction = friction.empty() ? nullptr : friction.data();
     d.shockmass = shockmass.data();
+    d.id = ids.empty() ? nullptr : ids.data();
     d.prim_count = prim_count();
     d.prim_points = prims.data();
     d.restlength = restlength.data();

@@ -84,7 +84,7 @@ AttributeHolds& AttributeHolds::operator=(const AttributeHolds& o) {
   holds_.clear();  // this store's arrays are replaced by the copy's
   return *this;
 }
-AttributeHolds& AttributeHolds::operator=(AttributeHolds&& o) noexcept {
+AttributeHolds& AttributeHolds::operator=(AttributeHolds&& o) {
   o.fetch_all();
   holds_.clear();
   return *this;

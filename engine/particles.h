@@ -54,9 +54,9 @@ class AttributeHolds {
   AttributeHolds() = default;
   // a copy or a move: the source's holds fetched first (they write the arrays copied next)
   AttributeHolds(const AttributeHolds& o) { o.fetch_all(); }
-  AttributeHolds(AttributeHolds&& o) noexcept { o.fetch_all(); }
+  AttributeHolds(AttributeHolds&& o) { o.fetch_all(); }  // a fetch may throw: not noexcept
   AttributeHolds& operator=(const AttributeHolds& o);
-  AttributeHolds& operator=(AttributeHolds&& o) noexcept;
+  AttributeHolds& operator=(AttributeHolds&& o);
 
   void hold(std::string_view name, const void* owner, std::function<void()> fetch);
   bool held(std::string_view name) const;

@@ -184,8 +184,8 @@ class GrainsNode : public Node {
   // the solver's (its cell order is made again at each frame's first substep; impact data
   // starts again with each frame)
   void save_state(StateWriter& w) const override { solver_.save_state(w); }
-  const GrainsSolver& solver() const { return solver_; }
   void load_state(StateReader& r) override { solver_.load_state(r); }
+  const GrainsSolver& solver() const { return solver_; }  // grains_solver()
 
  private:
   // The table's rows (kernels/param_table.h) evaluated, and the moment's substep.
@@ -451,10 +451,6 @@ class GrainsNode : public Node {
     }
   }
 
-  // The solver gets its grains in cell order (z-order of cells one interaction distance wide), so
-  // that grains near in space are near in memory and the iterations' neighbour reads stay in
-  // cache. Only the solver's compact copy is ordered; the store keeps its order. The order
-  // depends on the positions alone, so every thread count sees the same one.
   // The substep's end held on the device (GrainsSolver::end_held): the store's P and v of this
   // node's grains are brought back by the first read of each (particles.h), through the grains'
   // order as it is now (held_idx_: the next substep may sort them again), or taken up by the
@@ -470,6 +466,10 @@ class GrainsNode : public Node {
     s.hold("v", this, [this, scatter] { scatter("v", solver_.end_velocities()); });
   }
 
+  // The solver gets its grains in cell order (z-order of cells one interaction distance wide), so
+  // that grains near in space are near in memory and the iterations' neighbour reads stay in
+  // cache. Only the solver's compact copy is ordered; the store keeps its order. The order
+  // depends on the positions alone, so every thread count sees the same one.
   void sort_by_cell(ParticleStore& s, const GrainsSettings& st, float half_sep) {
     const size_t n = idx_.size();
     if (n < 2) return;

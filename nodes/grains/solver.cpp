@@ -111,8 +111,9 @@ int32_t find_root(std::vector<int32_t>& parent, int32_t a) {
 // the substep works relative to the box centre rounded to a multiple of S. Every coordinate x
 // then lies within S of the origin o while both exceed 1.5 S, so x / o is within [0.6, 1.67]:
 // x - o is exact (Sterbenz), and so is adding o back, so a grain that does not move keeps its
-// world position bit for bit. Near the origin the shift is 0 and nothing changes.
-// the origin of the box [lo, hi] of the grains' finite positions (lo > hi: none)
+// world position bit for bit. Near the origin the shift is 0 and nothing changes. box_origin:
+// that origin for the box [lo, hi] of the grains' finite positions (lo > hi: none), which
+// local_origin measures here (an end held on the device measures it there: write_back).
 Vec3 box_origin(const float lo_f[3], const float hi_f[3]) {
   if (!(lo_f[0] <= hi_f[0])) return {};
   const double lo[3] = {lo_f[0], lo_f[1], lo_f[2]}, hi[3] = {hi_f[0], hi_f[1], hi_f[2]};
@@ -1419,7 +1420,8 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
       end_hit_.clear();
       return;
     }
-    device_.device->fetch_end(end_P_.data(), end_v_.data(), d.n);
+    device_.end_P_stale = device_.end_v_stale = true;
+    sync_end(true, true);
   }
   const long ln = static_cast<long>(d.n);
   const bool colliders_on = collider_count > 0;

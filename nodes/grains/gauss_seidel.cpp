@@ -619,6 +619,8 @@ bool GrainsSolver::seq_list_kept(const SubstepContext& c, bool pairs,
                                  const std::vector<float>& grain) const {
   const gr_grains& g = c.g;
   if (!seq_valid_ || !c.same_rows || !pairs || c.prm.mass_shock == 2) return false;
+  // the sleepers of the device's sleeping test, whose inverse masses the host does not see
+  if (sleep_there_ != slept_there_ || sleep_changed_) return false;
   if (seq_friction_[0] != c.prm.friction_with_particles ||
       seq_friction_[1] != c.prm.friction_with_colliders)
     return false;

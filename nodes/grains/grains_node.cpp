@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <unordered_map>
 
 #include "engine/node.h"
@@ -66,7 +67,12 @@ class GrainsNode : public Node {
     // device (use_opencl, GrainsData::may_hold_end), held in the store (hold_end)
     const bool impacts = st.add_impact_data, feedback = st.enable_collision_feedback;
     const bool sleeping = st.sleep_speed > 0 && !impacts && !feedback;
-    const bool may_hold = st.use_opencl && !sleeping && !impacts && !feedback &&
+    // with use_opencl the device makes the whole sleeping test where it can
+    // (GrainsSolver::sleeps_on_device), which then reads no position here
+    const bool sleep_there =
+        sleeping && st.use_opencl && s.prim_count() == 0 &&
+        solver_.sleeps_on_device(st, ctx.colliders.data(), ctx.colliders.size());
+    const bool may_hold = st.use_opencl && (!sleeping || sleep_there) && !impacts && !feedback &&
                           st.mass_shock() != MassShock::Global && s.prim_count() == 0;
     // where this node's last substep left its end held and nothing has read its positions
     // since (nor changed its velocities), the substep starts from there: the same grains in
@@ -138,14 +144,20 @@ class GrainsNode : public Node {
     }
     // a sleeper exchanges no impulse with the colliders: impact data and collision feedback
     // keep every grain awake, so that a resting heap still presses on what holds it
-    if (sleeping) put_to_sleep(s, d, st);
+    if (sleep_there)
+      sleep_on_device(s, d, st, resorted);
+    else if (sleeping)
+      put_to_sleep(s, d, st);
     d.may_hold_end = may_hold;
     d.start_held = start_held;
     // stats only for error control: the evaluator measures each frame itself (measure_frame)
     GrainsStats stats;
     solver_.substep(d, st, ctx.colliders.data(), ctx.colliders.size(),
                     ctx.substep_error ? &stats : nullptr);
-    if (sleeping) update_sleep(s, st, ctx.colliders);
+    if (sleep_there)
+      hold_sleep(s);
+    else if (sleeping)
+      update_sleep(s, st, ctx.colliders);
     if (ctx.substep_error) *ctx.substep_error = std::max(*ctx.substep_error, stats.mean_penetration);
     if (d.prim_count > 0) scatter_constraints(s);
     if (impacts) write_impacts(ctx, d);
@@ -210,93 +222,96 @@ class GrainsNode : public Node {
     return st;
   }
 
-  // Sleeping (sleep_speed > 0; DESIGN §4), its speeds in grain radii a second (one number
-  // serves millimetre sand and metre boulders). Point attributes carry it from substep to
-  // substep: sleepanchor, where the grain's current stay began, sleeptime, how long (s) it has
-  // stayed within sleep_speed x sleep_time radii of it, sleepaccel, its force / mass when it
-  // fell asleep, and sleepcontacts, how many grains touched it then.
+  // Sleeping (sleep_speed > 0; DESIGN §4; kernels/sleep.h), its speeds in grain radii a second
+  // (one number serves millimetre sand and metre boulders). Point attributes carry it from
+  // substep to substep: sleepanchor, where the grain's current stay began, sleeptime, how long
+  // (s) it has stayed within sleep_speed x sleep_time radii of it, sleepaccel, its force / mass
+  // when it fell asleep, and sleepcontacts, how many grains touched it then.
   // A grain whose sleeptime has reached sleep_time sleeps: for the substep it is a fixed grain
   // (mass 0, v 0), which the others lean on and bounce off like the help page's fixed grains,
   // and it ends the substep where it began. Pinned grains and constraint endpoints never sleep
-  // (a sleeper would anchor its partner).
-  void put_to_sleep(ParticleStore& s, GrainsData& d, const GrainsSettings& st) {
+  // (a sleeper would anchor its partner). The host makes it here (put_to_sleep, update_sleep),
+  // a device around its substep (sleep_on_device), with the same functions.
+  static gr_sleep_params sleep_params(const GrainsSettings& st) {
+    gr_sleep_params sp;
+    sp.dt = st.dt;
+    sp.sleep_time = st.sleep_time;
+    sp.stay = st.sleep_speed * st.sleep_time;
+    sp.wake = 4.0f * st.sleep_speed;
+    return sp;
+  }
+  static constexpr const char* kSleepFloats[] = {"sleeptime", "sleepanchor", "sleepaccel"};
+
+  // can_sleep_: 0 for a constraint's endpoint or a pinned grain (a grain without mass is
+  // refused by the test itself); whether any is
+  bool mark_can_sleep(const GrainsData& d) {
     const size_t n = idx_.size();
-    float* T = s.f("sleeptime");
-    float* A = s.v3("sleepanchor");
-    const float* a_slept = s.v3("sleepaccel");
-    const float* F = s.v3("force");
-    const float* P = s.v3("P");
-    asleep_.assign(n, 0);
     can_sleep_.assign(n, 1);
-    for (size_t c = 0; c < 2 * d.prim_count; ++c) can_sleep_[d.prim_points[c]] = 0;
+    bool any = false;
+    for (size_t c = 0; c < 2 * d.prim_count; ++c) can_sleep_[d.prim_points[c]] = 0, any = true;
     if (d.targetstiffness)
       for (size_t k = 0; k < n; ++k)
-        if (d.targetstiffness[k] > 0) can_sleep_[k] = 0;
+        if (d.targetstiffness[k] > 0) can_sleep_[k] = 0, any = true;
+    return any;
+  }
+
+  // the state, gathered from the store
+  void gather_sleep_state(ParticleStore& s) {
+    gather1(s.f("sleeptime"), sleep_time_);
+    gather3(s.v3("sleepanchor"), sleep_anchor_);
+    gather3(s.v3("sleepaccel"), sleep_accel_);
+    const int32_t* touched = s.i("sleepcontacts");
+    sleep_contacts_.resize(idx_.size());
+    for (size_t k = 0; k < idx_.size(); ++k) sleep_contacts_[k] = touched[idx_[k]];
+  }
+
+  // Before the substep, here: which grains sleep through it (gr_sleep_begin), made fixed grains.
+  void put_to_sleep(ParticleStore& s, GrainsData& d, const GrainsSettings& st) {
+    const size_t n = idx_.size();
+    mark_can_sleep(d);
     awake_mass_ = mass_;
     v_start_ = v_;
     P_start_ = P_;
+    gather_sleep_state(s);
+    asleep_.assign(n, 0);
+    woken_.assign(n, 0);
+    fast_.assign(n, 0);
+    sleep_ = gr_sleep{};
+    sleep_.time = sleep_time_.data();
+    sleep_.anchor = sleep_anchor_.data();
+    sleep_.accel = sleep_accel_.data();
+    sleep_.contacts = sleep_contacts_.data();
+    sleep_.can = can_sleep_.data();
+    sleep_.mass = awake_mass_.data();
+    sleep_.radius = r_.data();
+    sleep_.force = s.v3("force");
+    sleep_.force_index = idx_.data();
+    sleep_.start = P_start_.data();
+    sleep_.start_v = v_start_.data();
+    sleep_.asleep = asleep_.data();
+    sleep_.woken = woken_.data();
+    sleep_.fast = fast_.data();
+    const gr_sleep_params sp = sleep_params(st);
     for (size_t k = 0; k < n; ++k) {
-      if (!(mass_[k] > 0)) can_sleep_[k] = 0;
-      const uint32_t i = idx_[k];
-      if (!can_sleep_[k] || !(T[i] >= st.sleep_time)) continue;
-      // a force that changed since the grain fell asleep (by more than 1% of it, or 1e-3 m/s^2)
-      // wakes it: a gravity that tilts, a wind that starts
-      // as does a move from outside (an attribute node's) beyond its stay
-      const Vec3 a0 = load3(a_slept, i);
-      if (length(load3(F, i) / mass_[k] - a0) > 0.01f * length(a0) + 1e-3f ||
-          length(load3(P, i) - load3(A, i)) > st.sleep_speed * st.sleep_time * r_[k]) {
-        T[i] = 0.0f;
-        store3(A, i, load3(P_.data(), k));
-        continue;
-      }
+      if (!sleep_begin(sp, sleep_, k, P_start_.data())) continue;
       asleep_[k] = 1;
       mass_[k] = 0.0f;
       store3(v_.data(), k, Vec3{});
     }
   }
 
-  // After the substep: a sleeper the substep moved faster than the wake speed (a collider pushed
-  // it) wakes there, the others go back to where they slept; a sleeper touched by a collider that
-  // moved, or by an awake grain faster than the wake speed at the substep's start or end, wakes,
-  // as does one that fewer grains touch than when it fell asleep (a grain under it was killed,
-  // or rolled away); awake grains count their stay and fall asleep with v = 0 (their force /
-  // mass and their contacts noted) when it reaches sleep_time. The wake speed is 4 x sleep_speed
-  // beyond the speed one substep of the grain's own forces gives (a resting grain's velocity
-  // holds up to that much of its fall). Each grain writes only its own slots: the same for any
-  // thread count.
+  // After the substep, here: the sleepers put back or woken (gr_sleep_settle), woken by a
+  // collider that moved this substep and touches them at its start or end pose (a floor that
+  // drops away leaves none hanging), or along their rows (gr_sleep_rows_wake), and every
+  // grain's stay counted (gr_sleep_stay). Each grain writes only its own slots: the same for
+  // any thread count.
   void update_sleep(ParticleStore& s, const GrainsSettings& st,
                     const std::vector<ColliderState>& colliders) {
     const size_t n = idx_.size();
-    float* T = s.f("sleeptime");
-    float* A = s.v3("sleepanchor");
-    float* a_slept = s.v3("sleepaccel");
-    int32_t* touched = s.i("sleepcontacts");
-    const float* F = s.v3("force");
-    const float dt = st.dt, wake = 4.0f * st.sleep_speed;
-    const float stay = st.sleep_speed * st.sleep_time;
-    auto wake_limit = [&](size_t k) {
-      return wake * r_[k] + length(load3(F, idx_[k])) / awake_mass_[k] * dt;
-    };
-    woken_.assign(n, 0);
+    const gr_sleep_params sp = sleep_params(st);
     bool moved = false;  // a sleeper put back where it began (its substep moved it a little)
-    for (size_t k = 0; k < n; ++k) {
-      if (!asleep_[k]) continue;
-      const Vec3 start = load3(P_start_.data(), k);
-      if (length(load3(P_.data(), k) - start) > wake_limit(k) * dt) {
-        woken_[k] = 1;
-      } else {
-        moved = moved || std::memcmp(&P_[3 * k], &P_start_[3 * k], 3 * sizeof(float)) != 0;
-        store3(P_.data(), k, start);
-        store3(v_.data(), k, Vec3{});
-      }
-    }
-    // the awake grains moving fast enough to wake a sleeper they touch
-    fast_.assign(n, 0);
-    for (size_t j = 0; j < n; ++j) {
-      if (asleep_[j] || !(awake_mass_[j] > 0)) continue;
-      const float speed = std::max(length(load3(v_start_.data(), j)), length(load3(v_.data(), j)));
-      fast_[j] = speed > wake_limit(j);
-    }
+    for (size_t k = 0; k < n; ++k)
+      moved = sleep_settle(sp, sleep_, k, P_.data(), v_.data()) || moved;
     // Each grain's reads along its neighbour row (kernels/row_stats.h), made where the rows are:
     // on the device while they stay there (use_opencl), else along the host's (sleep_rows.h)
     const bool there = solver_.sleep_rows_on_device(P_.data(), moved, fast_.data(), &row_words_);
@@ -313,8 +328,7 @@ class GrainsNode : public Node {
       if (there) return (row_words_[k] & GR_SLEEP_FAST) != 0;
       return sleep_row_fast_near(*rows, P_.data(), r_.data(), fast_.data(), k, GR_SLEEP_NEAR);
     };
-    // a collider that moved this substep wakes the sleepers it touches, at its start or end
-    // pose (a floor that drops away leaves none hanging)
+    const float dt = st.dt;
     for (const ColliderState& col : colliders) {
       if (col.still()) continue;
       for (size_t k = 0; k < n; ++k) {
@@ -327,28 +341,79 @@ class GrainsNode : public Node {
     if (there || rows) {
       for (size_t k = 0; k < n; ++k) {
         if (!asleep_[k] || woken_[k]) continue;
-        // a contact it slept on is gone: a grain 1.05 radii-sums away when it fell asleep is
-        // counted until 1.25 (an awake neighbour's jiggle does not wake it); or an awake
-        // neighbour within 1.05 moves fast
-        if (touching(k, true) < touched[idx_[k]] || fast_near(k)) woken_[k] = 1;
+        const int32_t kept = touching(k, true);
+        gr_sleep_rows_wake(&sleep_, static_cast<int>(k), kept,
+                           kept < sleep_contacts_[k] ? 0 : fast_near(k));
       }
     }
+    for (size_t k = 0; k < n; ++k)
+      if (sleep_stay(sp, sleep_, k, P_.data(), v_.data())) sleep_contacts_[k] = touching(k, false);
+    float* T = s.f("sleeptime");
+    float* A = s.v3("sleepanchor");
+    float* a_slept = s.v3("sleepaccel");
+    int32_t* touched = s.i("sleepcontacts");
     for (size_t k = 0; k < n; ++k) {
       const uint32_t i = idx_[k];
-      const Vec3 p = load3(P_.data(), k);
-      if (asleep_[k] && !woken_[k]) continue;
-      if (woken_[k] || !can_sleep_[k] || length(p - load3(A, i)) > stay * r_[k]) {
-        store3(A, i, p);
-        T[i] = 0.0f;
-        continue;
-      }
-      T[i] += dt;
-      if (T[i] >= st.sleep_time) {
-        store3(v_.data(), k, Vec3{});
-        store3(a_slept, i, load3(F, i) / awake_mass_[k]);
-        touched[i] = touching(k, false);
-      }
+      T[i] = sleep_time_[k];
+      store3(A, i, load3(sleep_anchor_.data(), k));
+      store3(a_slept, i, load3(sleep_accel_.data(), k));
+      touched[i] = sleep_contacts_[k];
     }
+  }
+
+  // The device makes the test around the substep (GrainsData::sleep) from its state, which it
+  // keeps from one substep to the next while the store's attributes stay held by this node
+  // (hold_sleep) and the grains keep their order; else the state goes up from the store.
+  void sleep_on_device(ParticleStore& s, GrainsData& d, const GrainsSettings& st, bool resorted) {
+    const size_t n = idx_.size();
+    sleep_in_ = GrainsSleep{};
+    sleep_in_.params = sleep_params(st);
+    if (mark_can_sleep(d)) sleep_in_.can = can_sleep_.data();
+    bool there = !resorted && solver_.sleep_state_there(n) && s.held_by("sleepcontacts", this);
+    for (const char* name : kSleepFloats) there = there && s.held_by(name, this);
+    if (there) {
+      for (const char* name : kSleepFloats) s.claim(name, this);
+      s.claim("sleepcontacts", this);
+    } else {
+      gather_sleep_state(s);
+      sleep_in_.time = sleep_time_.data();
+      sleep_in_.anchor = sleep_anchor_.data();
+      sleep_in_.accel = sleep_accel_.data();
+      sleep_in_.contacts = sleep_contacts_.data();
+    }
+    d.sleep = &sleep_in_;
+  }
+
+  // the state the device's test left there, held in the store: each attribute is brought back
+  // by its first read, through the grains' order of this substep (held_idx_)
+  void hold_sleep(ParticleStore& s) {
+    held_idx_ = idx_;
+    auto scatter = [this, &s](const char* name, int width, const std::function<void(float*)>& get) {
+      const size_t n = held_idx_.size();
+      std::vector<float> from(width * n);
+      get(from.data());
+      float* to = width == 3 ? s.v3(name) : s.f(name);
+      for (size_t k = 0; k < n; ++k)
+        std::copy_n(&from[width * k], width, to + width * size_t(held_idx_[k]));
+    };
+    s.hold("sleeptime", this, [this, scatter] {
+      scatter("sleeptime", 1,
+              [this](float* to) { solver_.fetch_sleep_state(to, nullptr, nullptr, nullptr); });
+    });
+    s.hold("sleepanchor", this, [this, scatter] {
+      scatter("sleepanchor", 3,
+              [this](float* to) { solver_.fetch_sleep_state(nullptr, to, nullptr, nullptr); });
+    });
+    s.hold("sleepaccel", this, [this, scatter] {
+      scatter("sleepaccel", 3,
+              [this](float* to) { solver_.fetch_sleep_state(nullptr, nullptr, to, nullptr); });
+    });
+    s.hold("sleepcontacts", this, [this, &s] {
+      std::vector<int32_t> from(held_idx_.size());
+      solver_.fetch_sleep_state(nullptr, nullptr, nullptr, from.data());
+      int32_t* to = s.i("sleepcontacts");
+      for (size_t k = 0; k < held_idx_.size(); ++k) to[held_idx_[k]] = from[k];
+    });
   }
 
   // The primitives whose two endpoints are both gathered grains, with compact endpoints. A
@@ -517,8 +582,12 @@ class GrainsNode : public Node {
   std::vector<float> imp_j_, imp_x_, imp_n_;        // collider contacts of the substep
   std::vector<int32_t> imp_c_;
   std::unordered_map<int32_t, float> strongest_;    // id -> strongest normal impulse this frame
-  // sleeping (put_to_sleep, update_sleep): per gathered grain
+  // sleeping (put_to_sleep, update_sleep, sleep_on_device): per gathered grain
   std::vector<uint8_t> asleep_, can_sleep_, woken_, fast_;
+  std::vector<float> sleep_time_, sleep_anchor_, sleep_accel_;
+  std::vector<int32_t> sleep_contacts_;
+  gr_sleep sleep_{};
+  GrainsSleep sleep_in_;
   // each grain's sleeping reads along its row (gr_row_sleep), made on the device
   std::vector<uint32_t> row_words_;
   std::vector<float> awake_mass_, v_start_, P_start_;

@@ -1,7 +1,5 @@
 #include "nodes/grains/sleep_rows.h"
 
-#include "nodes/grains/kernels/row_stats.h"
-
 namespace grains {
 
 uint32_t sleep_row_near(const NeighborList& rows, const float* P, const float* radius, size_t k,
@@ -14,6 +12,19 @@ bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* 
                          const uint8_t* fast, size_t k, float reach) {
   return gr_row_fast_near(P, radius, rows.offsets.data(), rows.indices.data(), fast,
                           static_cast<int>(k), reach) != 0;
+}
+
+bool sleep_begin(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P) {
+  const int i = static_cast<int>(k);
+  return gr_sleep_begin(&sp, &s, i, gr_load3(P, i)) != 0;
+}
+
+bool sleep_settle(const gr_sleep_params& sp, const gr_sleep& s, size_t k, float* P, float* v) {
+  return gr_sleep_settle(&sp, &s, static_cast<int>(k), P, v) != 0;
+}
+
+bool sleep_stay(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P, float* v) {
+  return gr_sleep_stay(&sp, &s, static_cast<int>(k), P, v) != 0;
 }
 
 float rows_moved2(const float* p, const float* b, size_t n, int threads) {

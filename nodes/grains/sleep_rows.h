@@ -1,13 +1,14 @@
-// The grains node's sleeping test's reads along neighbour rows on the host
-// (kernels/row_stats.h), counted as a device counts them, bit for bit: this file's source is
-// compiled without a multiply and an add fused (CMakeLists.txt), as the device runs the shared
-// functions. GrainsSolver::sleep_rows_on_device makes them on the device while the rows are
-// there. The solver's Verlet test (GrainsSolver::keep_rows) is made here alike.
+// The grains node's sleeping test on the host, grain by grain (kernels/sleep.h), and its reads
+// along neighbour rows (kernels/row_stats.h), made as a device makes them, bit for bit: this
+// file's source is compiled without a multiply and an add fused (CMakeLists.txt), as the device
+// runs the shared functions. GrainsSolver::sleep_rows_on_device makes them on the device while the
+// rows are there. The solver's Verlet test (GrainsSolver::keep_rows) is made here alike.
 #pragma once
 #include <cstddef>
 #include <cstdint>
 
 #include "engine/neighbors.h"
+#include "nodes/grains/kernels/sleep.h"
 
 namespace grains {
 
@@ -18,6 +19,12 @@ uint32_t sleep_row_near(const NeighborList& rows, const float* P, const float* r
 // whether one of them flagged in `fast` (a byte a grain) lies within reach x (r_k + r_j)
 bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* radius,
                          const uint8_t* fast, size_t k, float reach);
+
+// kernels/sleep.h's stages of grain k (gr_sleep_begin, gr_sleep_settle, gr_sleep_stay), made
+// as a device makes them
+bool sleep_begin(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P);
+bool sleep_settle(const gr_sleep_params& sp, const gr_sleep& s, size_t k, float* P, float* v);
+bool sleep_stay(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P, float* v);
 
 // the largest squared distance between the positions p and b (n x 3 each) of one grain
 // (gr_rows_moved), over `threads` threads: the same float whatever their number

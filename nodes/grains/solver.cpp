@@ -562,6 +562,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   finished_there_ = collided_there_ = carried_ = end_stays_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
+  slept_there_ = sleep_there_;
+  sleep_there_ = sleep_changed_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
   start_held_ = d.start_held;
   if (start_held_ && !(device_.end_there && d.n == n_))
@@ -585,6 +587,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // use_opencl: the start positions and velocities from the last substep's end on the device
   carry_start(c);
+  // the grains node's sleeping test, on the device (GrainsData::sleep)
+  if (d.sleep) sleep_begin(c);
 
   // 1. predict
   predict(c);
@@ -840,6 +844,46 @@ void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
     auto it = std::lower_bound(sorted.begin(), sorted.end(), std::pair<int32_t, gr_uint>{id[i], 0});
     if (it != sorted.end() && it->first == id[i]) carry_from_[i] = it->second;
   }
+}
+
+bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
+                                    size_t collider_count) {
+  if (!s.use_opencl || s.contact_solver != kContactGaussSeidel || s.host_finish ||
+      s.keep_velocity || s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
+    return false;
+  for (size_t c = 0; c < collider_count; ++c)
+    if (!colliders[c].still()) return false;
+  opencl::Iterations& device = open_device();
+  return device.builds_contacts() && device.sleeps_there();
+}
+
+void GrainsSolver::fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts) {
+  if (!(device_.device &&
+        device_.device->fetch_sleep(time, anchor, accel, contacts, sleep_state_n_)))
+    throw std::logic_error("grains: the device no longer holds the sleeping test's state");
+}
+
+// The grains node's sleeping test begun on the device (kernels/sleep.h): each grain's start
+// (what the last end there wrote, for a start held there; else d.P, sent) and velocity kept, a
+// sleeper made a fixed grain in the arrays the substep reads there. The host's inverse masses
+// stay the awake grains': the contact loop's equal-grains path is off, and gauss_seidel's list
+// is built again where a grain's sleep changed (seq_list_kept).
+void GrainsSolver::sleep_begin(SubstepContext& c) {
+  const GrainsSleep& z = *c.d.sleep;
+  bool uniform = false;
+  const float* force = device_force(c.g, &uniform);
+  opencl::Iterations::SleepState state;
+  state.time = z.time, state.anchor = z.anchor, state.accel = z.accel, state.contacts = z.contacts;
+  bool changed = true;
+  if (!open_device().sleep_begin(c.g, z.params, n_, start_held_ ? nullptr : c.d.P, z.can, force,
+                                 uniform, z.time ? &state : nullptr, &changed))
+    throw std::logic_error("grains: the device cannot begin the sleeping test it was given");
+  sleep_there_ = true;
+  sleep_changed_ = changed || !slept_there_;
+  sleep_params_ = z.params;
+  sleep_state_n_ = n_;
+  c.g.uniform_inv_mass = 0.0f;
+  ++slept_device_;
 }
 
 // A start held on the device (GrainsData::start_held) stays there where no stage reads the start
@@ -1405,6 +1449,16 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     else
       end_ids_.clear();
   }
+  // the sleeping test's end on the device (sleep_begin), along the rows where they are, before
+  // the box of what the end wrote is measured
+  if (sleep_there_) {
+    const bool device_rows = candidates_on_ && device_.rows_stale;
+    if (!finished_there_ ||
+        !device_.device->sleep_end(sleep_params_, d.n, device_rows,
+                                   candidates_on_ && !device_rows ? &neighbors_ : nullptr))
+      throw std::logic_error("grains: the device cannot end the sleeping test it began");
+    device_.end_P_stale = device_.end_v_stale = true;
+  }
   // the device's end stays there when every position and velocity it wrote is finite (else
   // they come back, for the engine's check to name the grain), measured there with the box
   // that gives the next substep's origin
@@ -1421,8 +1475,8 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
       return;
     }
     device_.end_P_stale = device_.end_v_stale = true;
-    sync_end(true, true);
   }
+  if (finished_there_) sync_end(true, true);  // what the sleeping test changed there, too
   const long ln = static_cast<long>(d.n);
   const bool colliders_on = collider_count > 0;
   const float* p = p_.data();
@@ -1621,6 +1675,8 @@ void GrainsSolver::save_state(StateWriter& w) const {
 }
 
 void GrainsSolver::load_state(StateReader& r) {
+  sleep_state_n_ = 0;  // the node sends its attributes' state again
+  sleep_there_ = slept_there_ = false;
   r.section("grains rows");
   r.value(rows_valid_);
   r.value(rows_skin_);

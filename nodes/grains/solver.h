@@ -17,6 +17,7 @@
 #include "engine/state_stream.h"
 #include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
 #include "nodes/grains/kernels/sequential.h"  // gr_seq_contact
+#include "nodes/grains/kernels/sleep.h"       // gr_sleep_params
 
 namespace grains {
 
@@ -97,6 +98,20 @@ struct GrainsSettings {
   }
 };
 
+// The grains node's sleeping test made on the device around a substep (use_opencl; GrainsData::
+// sleep, GrainsSolver::sleeps_on_device; kernels/sleep.h): its speeds and times, which grains
+// may sleep (n, null: every grain with a mass; a pinned one may not) and the state to send (the
+// node's attributes, n, n x 3, n x 3 and n), all null where the device's from the last substep
+// stands (sleep_state_there). The node's d.mass is then each grain's mass awake.
+struct GrainsSleep {
+  gr_sleep_params params{};
+  const uint8_t* can = nullptr;
+  const float* time = nullptr;
+  const float* anchor = nullptr;
+  const float* accel = nullptr;
+  const int32_t* contacts = nullptr;
+};
+
 // Compact per-grain arrays (n grains). Optional attribute arrays are nullptr when the point
 // attribute is missing (= 1, the help page's default scale).
 struct GrainsData {
@@ -134,6 +149,8 @@ struct GrainsData {
   // P and v are not read, only written)
   bool may_hold_end = false;
   bool start_held = false;
+  // the sleeping test on the device around this substep (GrainsSleep), or null
+  const GrainsSleep* sleep = nullptr;
   // rigid shape matching: its connectivity is the 2-point primitives above (prim_points), dead
   // ones included until they are removed
   // collider contacts, out (impact data, collision feedback); all set or all nullptr. Each grain
@@ -210,6 +227,21 @@ class GrainsSolver {
                             std::vector<uint32_t>* out);
   // the sleeping tests made on the device so far
   size_t sleep_rows_device() const { return sleep_rows_device_; }
+  // Whether the device can make the grains node's whole sleeping test around a substep with
+  // these settings and colliders (GrainsData::sleep): gauss_seidel's substep on the device,
+  // ended there with its velocities (no kept start velocity, no host_finish), no global mass
+  // shock, no mesh collider and none that moves (whose wake test is the host's), a device with
+  // the rows' kernels that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
+  bool sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
+                        size_t collider_count);
+  // whether the device holds the test's state of n grains, as the last substep left it, and
+  // that state brought back (n, n x 3, n x 3, n; any null)
+  bool sleep_state_there(size_t n) const {
+    return n > 0 && sleep_state_n_ == n && device_.device != nullptr;
+  }
+  void fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts);
+  // the substeps so far whose whole sleeping test the device made
+  size_t slept_on_device() const { return slept_device_; }
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
@@ -410,6 +442,14 @@ class GrainsSolver {
   std::vector<gr_uint> end_changed_;
   std::vector<uint8_t> end_hit_;
   size_t sleep_rows_device_ = 0;  // sleep_rows_device()
+  // the sleeping test made on the device this substep (GrainsData::sleep; sleep_begin before
+  // the prediction, sleep_end in write_back), and in the last; whether a grain sleeps now that
+  // did not then, or the reverse (gauss_seidel's list is then built again: the inverse masses
+  // the host compares are the grains' awake); the grains of the state there
+  bool sleep_there_ = false, slept_there_ = false, sleep_changed_ = false;
+  gr_sleep_params sleep_params_{};
+  size_t sleep_state_n_ = 0, slept_device_ = 0;
+  void sleep_begin(SubstepContext& c);
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;

@@ -166,24 +166,38 @@ bool sweep_items(uint64_t* items, std::string* problem) {
   return true;
 }
 
-bool host_contacts(bool* host, std::string* problem) {
-  *host = false;
-  const char* text = std::getenv("GRAINS_OPENCL_HOST_CONTACTS");
+namespace {
+
+// an environment variable that is 0, 1 or unset (0)
+bool switch_variable(const char* name, bool* on, std::string* problem) {
+  *on = false;
+  const char* text = std::getenv(name);
   if (!text || !*text) return true;
   const std::string value = text;
   if (value != "0" && value != "1") {
-    *problem = "GRAINS_OPENCL_HOST_CONTACTS: '" + value + "' is neither 0 nor 1";
+    *problem = std::string(name) + ": '" + value + "' is neither 0 nor 1";
     return false;
   }
-  *host = value == "1";
+  *on = value == "1";
   return true;
+}
+
+}  // namespace
+
+bool host_contacts(bool* host, std::string* problem) {
+  return switch_variable("GRAINS_OPENCL_HOST_CONTACTS", host, problem);
+}
+
+bool host_sleep(bool* host, std::string* problem) {
+  return switch_variable("GRAINS_OPENCL_HOST_SLEEP", host, problem);
 }
 
 bool chosen_device(DeviceChoice* out, std::string* problem) {
   *out = DeviceChoice{};
   uint64_t cap = 0, items = 0;
-  bool host = false;
-  if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem) || !host_contacts(&host, problem))
+  bool host = false, sleep = false;
+  if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem) ||
+      !host_contacts(&host, problem) || !host_sleep(&sleep, problem))
     return false;
   const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
   const std::string text = env ? env : "";

@@ -59,6 +59,12 @@ bool sweep_items(uint64_t* items, std::string* problem);
 // comparing the two. Malformed: false, *problem says why. chosen_device() checks it too.
 bool host_contacts(bool* host, std::string* problem);
 
+// GRAINS_OPENCL_HOST_SLEEP: 1 has the host make the grains node's sleeping test, reading the
+// positions and velocities every substep; 0 or unset lets the device make it where it can
+// (Iterations::sleep_begin, sleep_end: the same decisions, bit for bit). For comparing the two.
+// Malformed: false, *problem says why. chosen_device() checks it too.
+bool host_sleep(bool* host, std::string* problem);
+
 struct BuildResult {
   bool ok = false;
   double seconds = 0;  // wall time of the build

@@ -125,6 +125,7 @@ struct Iterations::Impl {
   // kind), and each sweep kernel's own limit (CL_KERNEL_WORK_GROUP_SIZE) once asked
   size_t sweep_items = 1;
   bool builds_contacts = true;  // GRAINS_OPENCL_HOST_CONTACTS unset or 0
+  bool host_sleep = false;      // GRAINS_OPENCL_HOST_SLEEP=1
   std::vector<std::pair<cl_kernel, size_t>> group_limit;
   cl_device_id device = nullptr;
   // pre-stabilization's start positions, what carried contacts moved, their flags, and the
@@ -181,6 +182,17 @@ struct Iterations::Impl {
   // (in end_v, which only the end writes)
   cl_kernel carry = nullptr;
   Buffer carry_P, carry_from;  // carry_from: each grain's index in that end (a new order)
+  // the sleeping test (opencl/sleep.cpp): its kernels, the state of sleep_n grains (time,
+  // anchor, accel, contacts), the last sleep_begin's starts, start velocities, masses awake,
+  // whether each may sleep and sleeps (of asleep_n grains), the end's woken and `changed`
+  // flags, and rows sent from the host
+  cl_kernel sleep_begin = nullptr, sleep_settle = nullptr, sleep_update = nullptr;
+  Buffer sleep_time, sleep_anchor, sleep_accel, sleep_contacts, sleep_start, sleep_start_v,
+      sleep_mass, sleep_can, sleep_asleep, sleep_woken, sleep_changed, sleep_offsets,
+      sleep_indices;
+  size_t sleep_n = 0, asleep_n = 0;
+  bool sleep_can_all = true, sleep_force = false, sleep_force_uniform = false;
+  bool sleep_begun = false;  // sleep_begin ran this substep
   // what the last end there wrote, measured there (Iterations::end_bounds): the kernel, each
   // work-item's box and flag
   cl_kernel end_bounds = nullptr;
@@ -230,7 +242,10 @@ struct Iterations::Impl {
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
                       &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
                       &force, &end_v, &patch_index, &patch_values, &start, &carry_P, &end_part,
-                      &carry_from,
+                      &carry_from, &sleep_time, &sleep_anchor, &sleep_accel,
+                      &sleep_contacts, &sleep_start, &sleep_start_v, &sleep_mass, &sleep_can,
+                      &sleep_asleep, &sleep_woken, &sleep_changed, &sleep_offsets,
+                      &sleep_indices,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
@@ -241,7 +256,7 @@ struct Iterations::Impl {
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
                         finish, scatter3, final_collision, carry, predict, plane_same,
-                        rows_moved, end_bounds})
+                        rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

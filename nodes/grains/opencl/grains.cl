@@ -705,6 +705,7 @@ __kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global cons
  * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none);
  * gr_k_rows_moved: the largest squared move from b, the rows' positions, to p at part[w] */
 #include "row_stats.h"
+#include "sleep.h"
 
 __kernel void gr_k_row_overlaps(__global const float* P, __global const float* radius,
                                 __global const gr_uint* offsets, __global const gr_uint* indices,
@@ -748,6 +749,103 @@ __kernel void gr_k_sleep_rows(__global const float* P, __global const float* rad
   const int k = (int)get_global_id(0);
   if (k >= n) return;
   out[k] = gr_row_sleep(P, radius, offsets, indices, fast, k);
+}
+
+/* The sleeping test on the device (kernels/sleep.h; opencl/sleep.cpp), a work-item a grain. */
+GR_INLINE gr_sleep gr_device_sleep(__global float* time, __global float* anchor,
+                                   __global float* accel, __global int* contacts,
+                                   __global const uchar* can, __global const float* mass,
+                                   __global const float* radius, __global const float* force,
+                                   int force_uniform, __global const float* start,
+                                   __global const float* start_v, __global uchar* asleep,
+                                   __global uchar* woken, __global uchar* fast) {
+  gr_sleep s;
+  s.time = time;
+  s.anchor = anchor;
+  s.accel = accel;
+  s.contacts = contacts;
+  s.can = can;
+  s.mass = mass;
+  s.radius = radius;
+  s.force = force;
+  s.force_index = 0;
+  s.force_uniform = force_uniform;
+  s.start = start;
+  s.start_v = start_v;
+  s.asleep = asleep;
+  s.woken = woken;
+  s.fast = fast;
+  return s;
+}
+
+/* gr_k_sleep_begin: before the substep (gr_sleep_begin), from the start P (world) and the
+ * velocities v: the start and the start velocity kept (start, start_v), the mass awake
+ * (`awake`), and a sleeper made a fixed grain (mass, inverse mass and velocity 0). `changed`
+ * is set where a grain sleeps this substep and did not the last, or the reverse (`prev`: the
+ * last substep's are in asleep) */
+__kernel void gr_k_sleep_begin(gr_sleep_params sp, __global const float* P, __global float* start,
+                               __global float* v, __global float* start_v, __global float* mass,
+                               __global float* awake, __global float* inv_mass,
+                               __global const float* radius, __global const uchar* can,
+                               __global const float* force, int force_uniform,
+                               __global float* time, __global float* anchor,
+                               __global float* accel, __global uchar* asleep, int prev,
+                               __global int* changed, int n) {
+  const int k = (int)get_global_id(0);
+  gr_sleep s;
+  gr_float3 p;
+  int sleeps;
+  if (k >= n) return;
+  p = gr_load3(P, k);
+  gr_store3(start, k, p);
+  gr_store3(start_v, k, gr_load3(v, k));
+  awake[k] = mass[k];
+  s = gr_device_sleep(time, anchor, accel, 0, can, awake, radius, force, force_uniform, start,
+                      start_v, asleep, 0, 0);
+  sleeps = gr_sleep_begin(&sp, &s, k, p);
+  if (!prev || sleeps != (int)asleep[k]) *changed = 1;
+  asleep[k] = (uchar)sleeps;
+  if (!sleeps) return;
+  mass[k] = 0.0f;
+  inv_mass[k] = 0.0f;
+  gr_store3(v, k, (float3)(0.0f));
+}
+
+/* gr_k_sleep_settle: after the substep, at its end P and v (world; gr_sleep_settle) */
+__kernel void gr_k_sleep_settle(gr_sleep_params sp, __global float* P, __global float* v,
+                                __global const float* start, __global const float* start_v,
+                                __global const float* awake, __global const float* radius,
+                                __global const float* force, int force_uniform,
+                                __global uchar* asleep, __global uchar* woken,
+                                __global uchar* fast, int n) {
+  const int k = (int)get_global_id(0);
+  gr_sleep s;
+  if (k >= n) return;
+  s = gr_device_sleep(0, 0, 0, 0, 0, awake, radius, force, force_uniform, start, start_v, asleep,
+                      woken, fast);
+  gr_sleep_settle(&sp, &s, k, P, v);
+}
+
+/* gr_k_sleep_update: the sleepers the rows wake (gr_sleep_rows_wake, no rows: none), then
+ * each grain's stay (gr_sleep_stay), its contacts noted where it falls asleep */
+__kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __global float* v,
+                                __global const float* radius, __global const gr_uint* offsets,
+                                __global const gr_uint* indices, __global const float* awake,
+                                __global const uchar* can, __global const float* force,
+                                int force_uniform, __global float* time, __global float* anchor,
+                                __global float* accel, __global int* contacts,
+                                __global uchar* asleep, __global uchar* woken,
+                                __global const uchar* fast, int n) {
+  const int k = (int)get_global_id(0);
+  gr_sleep s;
+  if (k >= n) return;
+  s = gr_device_sleep(time, anchor, accel, contacts, can, awake, radius, force, force_uniform, 0,
+                      0, asleep, woken, 0);
+  if (offsets && asleep[k] && !woken[k])
+    gr_sleep_rows_wake(&s, k, (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_KEPT),
+                       gr_row_fast_near(P, radius, offsets, indices, fast, k, GR_SLEEP_NEAR));
+  if (gr_sleep_stay(&sp, &s, k, P, v))
+    contacts[k] = offsets ? (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_NEAR) : 0;
 }
 #endif
 

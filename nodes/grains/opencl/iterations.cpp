@@ -88,6 +88,7 @@ Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
   bool host = false;
   if (!host_contacts(&host, &problem)) throw std::runtime_error("use_opencl: " + problem);
   impl_->builds_contacts = !host;
+  if (!host_sleep(&impl_->host_sleep, &problem)) throw std::runtime_error("use_opencl: " + problem);
   impl_->device = d;
   cl_int status = CL_SUCCESS;
   impl_->ctx = clCreateContext(nullptr, 1, &d, nullptr, nullptr, &status);

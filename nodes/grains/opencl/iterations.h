@@ -4,8 +4,9 @@
 // iterations and friction passes (run()), and contact_solver gauss_seidel's list
 // (build_sequential()) and its solve from its contacts on (solve_sequential():
 // pre-stabilization, the velocity it takes back, the warm start, the passes and the velocity
-// update; run_sequential() for passes alone). GrainsSolver::substep does the rest on the CPU
-// (prediction, a mesh collider's planes, contact history, the contact list where the device
+// update; run_sequential() for passes alone), and the grains node's sleeping test around a
+// substep (sleep_begin(), sleep_end(); opencl/sleep.cpp). GrainsSolver::substep does the rest on
+// the CPU (prediction, a mesh collider's planes, contact history, the contact list where the device
 // does not build it; the Jacobi path's velocity update, final collisions, history, strain) and
 // hands each call its inputs. The kernels call the functions the CPU loops call (kernels/,
 // engine/pair_test.h, engine/collider_shape.h; grains.cl). Each per-grain work-item writes only its
@@ -25,6 +26,7 @@
 #include "engine/neighbors.h"
 #include "nodes/grains/kernels/iterate.h"
 #include "nodes/grains/kernels/sequential.h"
+#include "nodes/grains/kernels/sleep.h"
 
 namespace grains::opencl {
 
@@ -307,6 +309,35 @@ class Iterations {
   // what the last end there wrote (world positions into P, velocities into v; either null),
   // brought back; false when that end was not of n grains (or wrote no velocities, v asked for)
   bool fetch_end(float* P, float* v, size_t n);
+  // The grains node's sleeping test (kernels/sleep.h) on the device, around a substep whose
+  // end stays there. sleep_begin(), after carry_start() and before predict(): each grain's
+  // start (world: `P`, n x 3, sent; null: what the last end wrote, carry_start's source) and
+  // velocity kept, and a sleeper made a fixed grain in the arrays the substep reads (its mass,
+  // inverse mass and velocity 0: g.mass, g.inv_mass and g.v are sent first, as predict() sends
+  // them). The state (the node's attributes, n each: time, anchor x 3, accel x 3, contacts) goes
+  // up where `state` is set, else the last call's stands. `can` (n, null: every grain) says
+  // which grains may sleep; the force as predict() takes it. *changed: whether a grain sleeps
+  // that did not in the last call's substep, or the reverse (always, where the last call was
+  // not of n grains). False, with nothing done, where the device cannot (sleeps_there()).
+  struct SleepState {
+    const float* time = nullptr;
+    const float* anchor = nullptr;
+    const float* accel = nullptr;
+    const int32_t* contacts = nullptr;
+  };
+  bool sleeps_there() const;
+  bool sleep_begin(const gr_grains& g, const gr_sleep_params& sp, size_t n, const float* P,
+                   const uint8_t* can, const float* force, bool force_uniform,
+                   const SleepState* state, bool* changed);
+  // sleep_end(), after the substep's end there (SequentialSolve::Finish) and before
+  // end_bounds(): the sleepers put back or woken, each grain's stay counted, along the rows
+  // the last search left here (device_rows: of n grains), else along `rows` (sent; null: no
+  // rows). False where no sleep_begin() of n grains came first or the end is not there.
+  bool sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows, const NeighborList* rows);
+  // the state the last sleep_end() left, into the host arrays given (n, n x 3, n x 3, n; any
+  // null); false where it is not of n grains
+  bool fetch_sleep(float* time, float* anchor, float* accel, int32_t* contacts, size_t n);
+
   // what has crossed between the host and the device since it was opened
   Traffic traffic() const;
 

@@ -122,10 +122,12 @@ TEST_CASE("use_opencl: the sleeping test's counts agree with the host's at near 
 
 TEST_CASE("use_opencl: sleeping grains give the same frames with the rows left on the device",
           "[opencl][sleeping]") {
-  // sand_pile on the device for 36 frames: the node's sleeping test reads the rows on the device
-  // while they stay there; with GRAINS_OPENCL_HOST_CONTACTS=1 the host builds the contact list
-  // (the same list: "use_opencl: the contact list the device builds is the host's"), the rows
-  // come back and the host counts along them. The same bits, with grains asleep.
+  // sand_pile on the device for 36 frames with the host's sleeping test
+  // (GRAINS_OPENCL_HOST_SLEEP=1): it reads the rows on the device while they stay there; with
+  // GRAINS_OPENCL_HOST_CONTACTS=1 the host builds the contact list (the same list: "use_opencl:
+  // the contact list the device builds is the host's"), the rows come back and the host counts
+  // along them. The same bits, with grains asleep.
+  test::ScopedEnv host_sleep("GRAINS_OPENCL_HOST_SLEEP", "1");
   auto run = [] {
     register_builtin_nodes();
     std::vector<Override> overrides{parse_override("grains.use_opencl=true")};

@@ -104,6 +104,15 @@ class Node {
   // bit for bit (grains run --checkpoint-every / --resume). Nodes that carry nothing keep these.
   virtual void save_state(StateWriter&) const {}
   virtual void load_state(StateReader&) {}
+  // Error control's motion measure (engine/motion.h) over every grain (point with ispbd 1), made
+  // where this node holds their velocities (ParticleStore::hold): each grain into *worst and
+  // *fall as engine/motion_need.h's gr_motion_need adds it, from the grains' velocities, masses,
+  // radii and forces as the store holds them. False, with nothing added, where it cannot; the
+  // caller then reads the velocities, which brings them back.
+  virtual bool held_motion(const ParticleStore&, double /*fps*/, const MotionBounds&,
+                           double* /*worst*/, double* /*fall*/) {
+    return false;
+  }
 };
 
 enum class NodeRole {

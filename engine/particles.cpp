@@ -104,6 +104,11 @@ bool AttributeHolds::held_by(std::string_view name, const void* owner) const {
     if (h.name == name && h.owner == owner) return true;
   return false;
 }
+const void* AttributeHolds::holder(std::string_view name) const {
+  for (const Hold& h : holds_)
+    if (h.name == name) return h.owner;
+  return nullptr;
+}
 void AttributeHolds::claim(std::string_view name, const void* owner) {
   for (size_t k = 0; k < holds_.size(); ++k)
     if (holds_[k].name == name && holds_[k].owner == owner) {

@@ -61,6 +61,7 @@ class AttributeHolds {
   void hold(std::string_view name, const void* owner, std::function<void()> fetch);
   bool held(std::string_view name) const;
   bool held_by(std::string_view name, const void* owner) const;
+  const void* holder(std::string_view name) const;       // null: not held
   void claim(std::string_view name, const void* owner);  // no fetch
   void fetch(std::string_view name) const {
     if (!holds_.empty()) fetch_held(name);
@@ -110,6 +111,7 @@ class ParticleStore {
     holds_.hold(name, owner, std::move(fetch));
   }
   bool held(std::string_view name) const { return holds_.held(name); }
+  const void* holder(std::string_view name) const { return holds_.holder(name); }
   bool held_by(std::string_view name, const void* owner) const {
     return holds_.held_by(name, owner);
   }

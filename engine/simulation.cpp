@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "engine/geometry_io.h"
+#include "engine/motion.h"
 #include "engine/neighbors.h"
 
 namespace grains {
@@ -134,44 +135,13 @@ void Simulation::pose_colliders(SimObject& obj, double t_end, double dt) {
 
 namespace {
 
-// The fewest substeps of a frame (fps) in which no point moves more than bounds.step of its
-// radius in a substep, |v| dt + |a| dt^2 <= step r (a = force / mass, the last substep's): the
-// motion the neighbour candidates (1.5 x the summed radii) and the contacts can follow; r / 2
-// unless a node asks for less (MotionBounds). Only grains count (ispbd 1 after the last
-// substep): the solver sweeps its other points through the whole step. Points without a radius
-// are skipped; the answer is capped at `most`.
-// A resting grain's fall in one substep, |a| dt^2, is also held to bounds.fall r: the contacts
-// project each substep's fall back out, and a fall comparable to the curvature of the grains it
-// rests on carries it over their barriers. A grain in the pocket of three fixed grains, gravity
-// tilted towards an edge of the pocket, frictionless, leaves it at 12.5, 16.4, 18.0, 18.8 and
-// 19.1 degrees with falls of 0.21, 0.053, 0.013, 0.0033 and 0.0008 r (4 to 64 substeps of a
-// 24 fps frame, 1 cm grains; rigid spheres leave at 19.5, LIGGGHTS' Hertz grains at 18.6).
-// r / 64, the default, is 16 substeps for 1 cm grains at 24 fps (tests/nodes/grains/
-// test_pockets.cpp; docs/heap-angle.md "Pockets and pyramids").
-int motion_substeps(const ParticleStore& pts, double fps, int most, const MotionBounds& bounds) {
-  const float* v = pts.v3_if("v");  // positions are not read (they may stay held: particles.h)
-  const float* F = pts.v3_if("force");
-  const float* m = pts.f_if("mass");
-  const float* r = pts.f_if("pscale");
-  const int32_t* pbd = pts.i_if("ispbd");
-  if (!pts.has("P") || !v || !r || !pbd) return 1;
-  double worst = 1;
-  double fall = 0;  // the largest acc / r
-  for (size_t k = 0; k < pts.size(); ++k) {
-    const double reach = bounds.step * r[k];
-    if (!pbd[k] || !(reach > 0)) continue;
-    const double speed = length(load3(v, k));
-    const double acc = F && m && m[k] > 0 ? length(load3(F, k)) / m[k] : 0.0;
-    // the S with speed / (fps S) + acc / (fps S)^2 = reach: the positive root in 1 / (fps S)
-    const double x = acc > 0 ? (-speed + std::sqrt(speed * speed + 4 * acc * reach)) / (2 * acc)
-                             : (speed > 0 ? reach / speed : 0.0);
-    if (!(x > 0) || !std::isfinite(x)) continue;
-    worst = std::max(worst, 1.0 / (fps * x));
-    fall = std::max(fall, acc / r[k]);
-  }
-  // the fall from rest in one substep, acc dt^2, at most bounds.fall r
-  worst = std::max(worst, std::sqrt(fall / bounds.fall) / fps);
-  return static_cast<int>(std::min<double>(most, std::ceil(worst)));
+// the node of obj's chain that holds its points' attribute `name` (ParticleStore::hold), or null
+Node* holder_of(SimObject& obj, const char* name) {
+  const void* owner = obj.pts.holder(name);
+  if (!owner) return nullptr;
+  for (ChainNode& c : obj.chain)
+    if (c.impl.get() == owner) return c.impl.get();
+  return nullptr;
 }
 
 // base x the power of two that reaches at least `need`, at most `most`
@@ -349,7 +319,9 @@ void Simulation::step_object(SimObject& obj) {
     ++taken;
     frame_error = std::max(frame_error, substep_error);
     // what the grains' motion asks of the rest of the frame (read by both rules below)
-    const int need = control && s + 1 < substeps ? motion_substeps(pts, graph_.fps, most, bounds) : 0;
+    const int need = control && s + 1 < substeps
+                         ? motion_substeps(pts, graph_.fps, most, bounds, holder_of(obj, "v"))
+                         : 0;
     if (probing && s + 1 < substeps) {
       const int coarse = refine_to(base, need, most);
       if (!(frame_error < 0.2f * tolerance) || coarse >= substeps) {

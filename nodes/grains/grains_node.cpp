@@ -193,6 +193,37 @@ class GrainsNode : public Node {
     }
   }
 
+  // Error control's motion measure of the end this node holds on the device (hold_end), made
+  // there (GrainsSolver::motion_on_device) where this node's grains are every grain of the store
+  // and the masses, radii and forces the store holds for them are those the device read: the
+  // same floats as the host's measure, whose reads would bring the velocities back (12 bytes a
+  // grain) after every substep.
+  bool held_motion(const ParticleStore& s, double fps, const MotionBounds& bounds, double* worst,
+                   double* fall) override {
+    const size_t n = held_idx_.size();
+    if (!s.held_by("v", this) || !solver_.end_held() || n != mass_.size() || n != r_.size())
+      return false;
+    const int32_t* pbd = s.i_if("ispbd");
+    const float* m = s.f_if("mass");
+    const float* r = s.f_if("pscale");
+    const float* F = s.v3_if("force");
+    if (!pbd || !m || !r || !s.has("P")) return false;
+    size_t grains = 0;
+    for (size_t i = 0; i < s.size(); ++i) grains += pbd[i] != 0;
+    if (grains != n) return false;
+    bool uniform = false;
+    const float* rows = solver_.device_forces(&uniform);
+    if (!F != !rows) return false;
+    for (size_t k = 0; k < n; ++k) {
+      const uint32_t i = held_idx_[k];
+      if (!pbd[i] || std::memcmp(&m[i], &mass_[k], sizeof(float)) != 0 ||
+          std::memcmp(&r[i], &r_[k], sizeof(float)) != 0 ||
+          (F && std::memcmp(F + 3 * size_t(i), rows + (uniform ? 0 : 3 * k), 3 * sizeof(float))))
+        return false;
+    }
+    return solver_.motion_on_device(bounds.step, fps, worst, fall);
+  }
+
   // the solver's (its cell order is made again at each frame's first substep; impact data
   // starts again with each frame)
   void save_state(StateWriter& w) const override { solver_.save_state(w); }

@@ -563,7 +563,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   stabilize_passes_ = 0;
   device_.owner = this;
   slept_there_ = sleep_there_;
-  sleep_there_ = sleep_changed_ = false;
+  sleep_there_ = sleep_changed_ = force_there_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
   start_held_ = d.start_held;
   if (start_held_ && !(device_.end_there && d.n == n_))
@@ -857,6 +857,15 @@ bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState
   return device.builds_contacts() && device.sleeps_there();
 }
 
+bool GrainsSolver::motion_on_device(double step, double fps, double* worst, double* fall) {
+  if (!device_.end_there || !device_.device ||
+      !device_.device->motion(n_, force_there_, force_uniform_, sleep_there_, step, fps, worst,
+                              fall))
+    return false;
+  ++motions_device_;
+  return true;
+}
+
 void GrainsSolver::fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts) {
   if (!(device_.device &&
         device_.device->fetch_sleep(time, anchor, accel, contacts, sleep_state_n_)))
@@ -925,6 +934,9 @@ void GrainsSolver::predict(SubstepContext& c) {
   p_next_.resize(3 * n + 1);
   if (c.s.use_opencl && c.s.contact_solver == kContactGaussSeidel) {
     c.device_force = device_force(c.g, &c.force_uniform);
+    force_there_ = c.device_force != nullptr;
+    force_uniform_ = c.force_uniform;
+    if (force_there_ && force_uniform_) std::copy_n(c.device_force, 3, force_row_);
     if (!c.s.host_predict) {
       open_device().predict(c.g, c.prm, n, c.device_force, c.force_uniform);
       predicted_there_ = p_on_device_ = true;

@@ -242,6 +242,17 @@ class GrainsSolver {
   void fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts);
   // the substeps so far whose whole sleeping test the device made
   size_t slept_on_device() const { return slept_device_; }
+  // Error control's motion measure (engine/motion_need.h) of the end held on the device
+  // (end_held()), made there with the masses (awake), radii and forces this substep read, added
+  // into *worst and *fall; false where the device cannot. The forces as the device took them:
+  // each grain's row (n x 3), or one row for all (*uniform); null: none.
+  bool motion_on_device(double step, double fps, double* worst, double* fall);
+  const float* device_forces(bool* uniform) const {
+    *uniform = force_uniform_;
+    return force_there_ ? (force_uniform_ ? force_row_ : end_force_.data()) : nullptr;
+  }
+  // the motion measures made on the device so far
+  size_t motions_on_device() const { return motions_device_; }
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
@@ -448,7 +459,10 @@ class GrainsSolver {
   // the host compares are the grains' awake); the grains of the state there
   bool sleep_there_ = false, slept_there_ = false, sleep_changed_ = false;
   gr_sleep_params sleep_params_{};
-  size_t sleep_state_n_ = 0, slept_device_ = 0;
+  size_t sleep_state_n_ = 0, slept_device_ = 0, motions_device_ = 0;
+  // the force the device read this substep (device_forces): any, one row for all (a copy here)
+  bool force_there_ = false, force_uniform_ = false;
+  float force_row_[3] = {0, 0, 0};
   void sleep_begin(SubstepContext& c);
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;

@@ -197,6 +197,10 @@ struct Iterations::Impl {
   // work-item's box and flag
   cl_kernel end_bounds = nullptr;
   Buffer end_part;
+  // error control's motion measure of that end (Iterations::motion): the kernel, each
+  // work-item's two doubles
+  cl_kernel motion = nullptr;
+  Buffer motion_part;
   size_t carry_n = 0, carry_v_n = 0;
   // the substep's predicted positions made there (Iterations::predict, gr_k_predict), which the
   // search of rows or planes and the solve take
@@ -245,7 +249,7 @@ struct Iterations::Impl {
                       &carry_from, &sleep_time, &sleep_anchor, &sleep_accel,
                       &sleep_contacts, &sleep_start, &sleep_start_v, &sleep_mass, &sleep_can,
                       &sleep_asleep, &sleep_woken, &sleep_changed, &sleep_offsets,
-                      &sleep_indices,
+                      &sleep_indices, &motion_part,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
@@ -256,7 +260,8 @@ struct Iterations::Impl {
                         cell_place, row_count, row_fill, scan_blocks, scan_sums, scan_apply,
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
                         finish, scatter3, final_collision, carry, predict, plane_same,
-                        rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update})
+                        rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
+                        motion})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

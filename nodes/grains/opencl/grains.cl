@@ -704,6 +704,7 @@ __kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global cons
  * gr_k_row_overlaps: touching pairs, the largest overlap and the overlaps' sum at part[3 w ...];
  * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none);
  * gr_k_rows_moved: the largest squared move from b, the rows' positions, to p at part[w] */
+#include "motion_need.h"
 #include "row_stats.h"
 #include "sleep.h"
 
@@ -749,6 +750,27 @@ __kernel void gr_k_sleep_rows(__global const float* P, __global const float* rad
   const int k = (int)get_global_id(0);
   if (k >= n) return;
   out[k] = gr_row_sleep(P, radius, offsets, indices, fast, k);
+}
+
+/* gr_k_motion: error control's motion measure (engine/motion_need.h) over the grains w, w +
+ * items, ... of the end held there (v) with their forces (one row for all where force_uniform;
+ * none: null), masses and radii: part[2 w] the substeps a frame their motion needs (at least
+ * 1), part[2 w + 1] the largest acceleration / radius; the host takes the largest of each */
+__kernel void gr_k_motion(__global const float* v, __global const float* force, int force_uniform,
+                          __global const float* mass, __global const float* radius, double step,
+                          double fps, int n, int items, __global double* part) {
+  const int w = (int)get_global_id(0);
+  double worst = 1.0, fall = 0.0;
+  int k;
+  if (w >= items) return;
+  for (k = w; k < n; k += items) {
+    const int f = force_uniform ? 0 : k;
+    const float acc =
+        force ? gr_motion_acc(force[3 * f], force[3 * f + 1], force[3 * f + 2], mass[k]) : 0.0f;
+    gr_motion_need(v[3 * k], v[3 * k + 1], v[3 * k + 2], acc, radius[k], step, fps, &worst, &fall);
+  }
+  part[2 * w] = worst;
+  part[2 * w + 1] = fall;
 }
 
 /* The sleeping test on the device (kernels/sleep.h; opencl/sleep.cpp), a work-item a grain. */

@@ -171,6 +171,30 @@ bool Iterations::end_bounds(size_t n, float lo[3], float hi[3], bool* finite) {
   return true;
 }
 
+bool Iterations::motion(size_t n, bool has_force, bool force_uniform, bool awake, double step,
+                        double fps, double* worst, double* fall) {
+  Impl& m = *impl_;
+  m.open_neighbours();  // the kernel sits beside the rows' (cl_khr_fp64)
+  if (n == 0 || m.carry_v_n != n || !m.bounds || (awake && m.asleep_n != n)) return false;
+  // the work-items of end_bounds
+  const size_t items = std::min(16 * kGroup, ((n + 63) / 64 + kGroup - 1) / kGroup * kGroup);
+  m.motion_part.reserve(m.ctx, 2 * items * sizeof(double), m.largest);
+  cl_kernel k = m.kernel(m.motion, "gr_k_motion");
+  const int count = static_cast<int>(n), runs = static_cast<int>(items),
+            uniform = force_uniform ? 1 : 0;
+  arg(k, 0, m.end_v), set_buffer(k, 1, has_force ? &m.force : nullptr), arg(k, 2, uniform);
+  arg(k, 3, awake ? m.sleep_mass : m.arrays[kMass]), arg(k, 4, m.arrays[kRadius]);
+  arg(k, 5, step), arg(k, 6, fps), arg(k, 7, count), arg(k, 8, runs), arg(k, 9, m.motion_part);
+  m.launch(k, items);
+  std::vector<double> part(2 * items);
+  m.download(m.motion_part, part.data(), part.size() * sizeof(double));
+  for (size_t w = 0; w < items; ++w) {  // the largest, in any order the same
+    if (*worst < part[2 * w]) *worst = part[2 * w];
+    if (*fall < part[2 * w + 1]) *fall = part[2 * w + 1];
+  }
+  return true;
+}
+
 bool Iterations::fetch_end(float* P, float* v, size_t n) {
   Impl& m = *impl_;
   if (m.carry_n != n || (v && m.carry_v_n != n)) return false;

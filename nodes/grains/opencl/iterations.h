@@ -306,6 +306,14 @@ class Iterations {
   // is finite (7 floats a work-item come back). False, with nothing done, when that end was not
   // of n grains or wrote no velocities.
   bool end_bounds(size_t n, float lo[3], float hi[3], bool* finite);
+  // Error control's motion measure (engine/motion_need.h) of what the last end there wrote, n
+  // grains, with this substep's force (null: none; one row for all where force_uniform), masses
+  // (the sleeping test's masses awake where `awake`, else the substep's) and radii, added into
+  // *worst and *fall (16 bytes for each work-item, as end_bounds() has, come back). False, with
+  // nothing done, where that end was not of n grains or wrote no velocities, or the device has
+  // no double precision.
+  bool motion(size_t n, bool has_force, bool force_uniform, bool awake, double step, double fps,
+              double* worst, double* fall);
   // what the last end there wrote (world positions into P, velocities into v; either null),
   // brought back; false when that end was not of n grains (or wrote no velocities, v asked for)
   bool fetch_end(float* P, float* v, size_t n);

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "engine/mesh_shape.h"
+#include "engine/motion.h"
 #include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/meshes.h"
@@ -441,4 +442,58 @@ TEST_CASE("use_opencl: the substep's start made on the device from an end in ano
   const double saved =
       double(sent.solver.device_traffic().sent) - double(made.solver.device_traffic().sent);
   CHECK(saved == 24.0 * 512.0 * 39.0 - 28.0 * double(born_total) - 4.0 * 512.0 * double(reordered));
+}
+
+TEST_CASE(
+    "use_opencl: error control's motion measure of a held end made on the device is the host's",
+    "[opencl][gauss_seidel]") {
+  // The 512 falling grains, each end held on the device, for 40 substeps: the device's measure
+  // of the end (GrainsSolver::motion_on_device, engine/motion_need.h) against the host's over
+  // the same end brought back (engine/motion.h, motion_need), the largest need and the largest
+  // acceleration over radius the same doubles, bit for bit, at gauss_seidel's step (r / 4) and
+  // the default (r / 2), with one force for all and, from the 20th substep, a force of its own
+  // for each grain and masses that differ.
+  test::Scene sc = test::layered_block(true);
+  sc.hold_end = true;
+  const size_t n = sc.size();
+  const double fps = 24;
+  size_t measured = 0, moving = 0;  // measures that ask for more than one substep a frame
+  for (int k = 0; k < 40; ++k) {
+    INFO("substep " << k);
+    if (k == 20) {
+      if (sc.solver.end_held()) {
+        std::copy_n(sc.solver.end_positions(), 3 * n, sc.P.begin());
+        std::copy_n(sc.solver.end_velocities(), 3 * n, sc.v.begin());
+      }
+      sc.extra_force.resize(n);
+      for (size_t i = 0; i < n; ++i) {
+        sc.mass[i] = 1.0f + 0.25f * float(i % 5);
+        sc.extra_force[i] = Vec3{0.3f * float(i % 7) - 0.9f, 0.0f, 0.1f * float(i % 3)};
+      }
+    }
+    sc.substep();
+    REQUIRE(sc.solver.end_held());
+    for (const double step : {0.25, 0.5}) {
+      MotionBounds bounds;
+      bounds.step = step;
+      double worst = 1, fall = 0;
+      REQUIRE(sc.solver.motion_on_device(step, fps, &worst, &fall));
+      ParticleStore pts;
+      pts.add_points(n);
+      std::copy_n(sc.solver.end_positions(), 3 * n, pts.v3("P"));
+      std::copy_n(sc.solver.end_velocities(), 3 * n, pts.v3("v"));
+      std::copy_n(sc.force.data(), 3 * n, pts.v3("force"));
+      std::copy_n(sc.mass.data(), n, pts.f("mass"));
+      std::copy_n(sc.pscale.data(), n, pts.f("pscale"));
+      std::fill_n(pts.i("ispbd"), n, 1);
+      double host_worst = 1, host_fall = 0;
+      REQUIRE(motion_need(pts, fps, bounds, &host_worst, &host_fall));
+      CHECK(worst == host_worst);
+      CHECK(fall == host_fall);
+      moving += worst > 1.0;
+      ++measured;
+    }
+  }
+  CHECK(sc.solver.motions_on_device() == measured);
+  CHECK(moving > measured / 2);
 }

@@ -91,28 +91,36 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
   // positions and velocities after every frame, bit for bit. Without the probe, or with one
   // that reads no position or velocity ($ID x 2), every substep
   // but a frame's first (where the node sorts its grains again) starts from the end held
-  // there, and the 24 bytes a grain of each such end do not come back; with error control,
-  // which reads the velocities after each substep to pick the next frame's count, only the
-  // positions' 12 stay. With the probe no start is held.
+  // there, and the 24 bytes a grain of each such end do not come back, with error control too,
+  // whose motion measure is made there (Node::held_motion; 16 bytes for each of 64 work-items
+  // come back instead). With the probe no start is held. A probe that reads every velocity
+  // ($VX) has the host make the motion measure: the same frames, the same substeps.
   register_builtin_nodes();
   for (const bool control : {false, true})
     for (const float far : {0.0f, 96.0f}) {
       INFO("error control " << control << ", " << far << " m from the origin");
       Simulation held(bin_graph(nullptr, control, far), 1),
-          probed(bin_graph("$TX", control, far), 1), tagged(bin_graph("$ID * 2", control, far), 1);
+          probed(bin_graph("$TX", control, far), 1), tagged(bin_graph("$ID * 2", control, far), 1),
+          speeds(bin_graph("$VX", control, far), 1);
       int substeps = 0;
       for (int f = 0; f < 8; ++f) {
         held.step_frame();
         probed.step_frame();
         tagged.step_frame();
+        speeds.step_frame();
         INFO("frame " << f + 1);
         REQUIRE(held.object(0).pts.size() == 1000);
         CHECK(array(held, "P") == array(probed, "P"));
         CHECK(array(held, "v") == array(probed, "v"));
         CHECK(array(held, "P") == array(tagged, "P"));
+        CHECK(array(held, "P") == array(speeds, "P"));
+        CHECK(array(held, "v") == array(speeds, "v"));
         CHECK(held.object(0).stats.substeps == probed.object(0).stats.substeps);
+        CHECK(held.object(0).stats.substeps == speeds.object(0).stats.substeps);
         substeps += held.object(0).stats.substeps;
       }
+      REQUIRE(solver_of(speeds));
+      CHECK(solver_of(speeds)->motions_on_device() == 0);
       REQUIRE(solver_of(tagged));
       CHECK(solver_of(tagged)->held_starts() == solver_of(held)->held_starts());
       CHECK(tagged.object(0).pts.f_if("probe")[7] ==
@@ -136,6 +144,12 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
           double(p.device_traffic().received) - double(h.device_traffic().received);
       INFO(substeps << " substeps, " << h.held_starts() << " started there, "
                     << saved / (1000.0 * substeps) << " bytes a grain a substep less");
-      CHECK(saved == (control ? 12.0 : 24.0) * 1000.0 * double(h.held_starts()));
+      CHECK(saved == 24.0 * 1000.0 * double(h.held_starts()));
+      // each substep's measure but the frame's last (error control reads none there), and but
+      // those after an end not held
+      CHECK(h.motions_on_device() + 8 <= size_t(substeps));
+      CHECK(h.motions_on_device() + 8 + size_t(not_held) >= (control ? size_t(substeps) : 8));
+      if (!control) CHECK(h.motions_on_device() == 0);
+      CHECK(p.motions_on_device() == h.motions_on_device());
     }
 }

@@ -559,7 +559,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = p_made_ = false;
   plane_rows_there_ = planes_same_ = false;
   written_on_device_ = nullptr;
-  finished_there_ = collided_there_ = carried_ = end_stays_ = false;
+  finished_there_ = collided_there_ = carried_ = carried_from_ = end_stays_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   slept_there_ = sleep_there_;
@@ -818,6 +818,7 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
   if (carry_changed_.size() > n / 4) return;
   carried_ =
       device_.device->carry_start(P0_, v, n, origin, carry_changed_, from ? &carry_from_ : nullptr);
+  carried_from_ = carried_ && from;
 }
 
 // carry_from_: each of the n grains' index in the last end, found by its id (kNotInEnd: none);
@@ -867,9 +868,47 @@ bool GrainsSolver::motion_on_device(double step, double fps, double* worst, doub
 }
 
 void GrainsSolver::fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts) {
-  if (!(device_.device &&
-        device_.device->fetch_sleep(time, anchor, accel, contacts, sleep_state_n_)))
+  const size_t n = sleep_state_n_;
+  auto back = [n](auto* to, auto& kept, size_t width) {
+    const bool need = to && kept.empty();
+    if (need) kept.resize(width * n);
+    return need ? kept.data() : nullptr;
+  };
+  float* t = back(time, sleep_back_time_, 1);
+  float* an = back(anchor, sleep_back_anchor_, 3);
+  float* ac = back(accel, sleep_back_accel_, 3);
+  int32_t* co = back(contacts, sleep_back_contacts_, 1);
+  if ((t || an || ac || co) && !(device_.device && device_.device->fetch_sleep(t, an, ac, co, n)))
     throw std::logic_error("grains: the device no longer holds the sleeping test's state");
+  if (time) std::copy(sleep_back_time_.begin(), sleep_back_time_.end(), time);
+  if (anchor) std::copy(sleep_back_anchor_.begin(), sleep_back_anchor_.end(), anchor);
+  if (accel) std::copy(sleep_back_accel_.begin(), sleep_back_accel_.end(), accel);
+  if (contacts) std::copy(sleep_back_contacts_.begin(), sleep_back_contacts_.end(), contacts);
+}
+
+// Whether the device carries the state it holds into this substep (Iterations::sleep_carry)
+// instead of taking up the node's (z): where the last substep's test was made there and its
+// state came back whole since (the node's hold fetched), and the node's state is that, grain
+// for grain through the order carry_start carried (bit for bit: nothing wrote the attributes
+// since). A frame's first substep, whose grains the node sorts again after the frame's
+// output read them, then sends nothing for the test (32 bytes a grain before).
+bool GrainsSolver::carry_sleep(const GrainsSleep& z) {
+  const size_t m = sleep_state_n_, n = n_;
+  if (!slept_there_ || !carried_ || sleep_back_time_.size() != m ||
+      sleep_back_anchor_.size() != 3 * m || sleep_back_accel_.size() != 3 * m ||
+      sleep_back_contacts_.size() != m || (!carried_from_ && m != n))
+    return false;
+  const gr_uint* from = carried_from_ ? carry_from_.data() : nullptr;
+  const size_t f3 = 3 * sizeof(float);
+  for (size_t i = 0; i < n; ++i) {
+    const size_t j = from ? from[i] : i;
+    if (j >= m || std::memcmp(&z.time[i], &sleep_back_time_[j], sizeof(float)) != 0 ||
+        std::memcmp(&z.anchor[3 * i], &sleep_back_anchor_[3 * j], f3) != 0 ||
+        std::memcmp(&z.accel[3 * i], &sleep_back_accel_[3 * j], f3) != 0 ||
+        z.contacts[i] != sleep_back_contacts_[j])
+      return false;
+  }
+  return open_device().sleep_carry(n);
 }
 
 // The grains node's sleeping test begun on the device (kernels/sleep.h): each grain's start
@@ -884,8 +923,14 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
   opencl::Iterations::SleepState state;
   state.time = z.time, state.anchor = z.anchor, state.accel = z.accel, state.contacts = z.contacts;
   bool changed = true;
-  if (!open_device().sleep_begin(c.g, z.params, n_, start_held_ ? nullptr : c.d.P, z.can, force,
-                                 uniform, z.time ? &state : nullptr, &changed))
+  const bool carried = z.time && carry_sleep(z);
+  if (carried) ++sleep_carried_;
+  // the start as the last end there wrote it: held there, or every grain carried from it
+  // (carry_start: none differs, each found there), whose world positions are the host's (12
+  // bytes a grain less)
+  const bool start_there = start_held_ || (carried_ && carry_changed_.empty());
+  if (!open_device().sleep_begin(c.g, z.params, n_, start_there ? nullptr : c.d.P, z.can, force,
+                                 uniform, z.time && !carried ? &state : nullptr, &changed))
     throw std::logic_error("grains: the device cannot begin the sleeping test it was given");
   sleep_there_ = true;
   sleep_changed_ = changed || !slept_there_;
@@ -1469,6 +1514,8 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
         !device_.device->sleep_end(sleep_params_, d.n, device_rows,
                                    candidates_on_ && !device_rows ? &neighbors_ : nullptr))
       throw std::logic_error("grains: the device cannot end the sleeping test it began");
+    sleep_back_time_.clear(), sleep_back_anchor_.clear(), sleep_back_accel_.clear();
+    sleep_back_contacts_.clear();
     device_.end_P_stale = device_.end_v_stale = true;
   }
   // the device's end stays there when every position and velocity it wrote is finite (else

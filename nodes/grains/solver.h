@@ -240,8 +240,11 @@ class GrainsSolver {
     return n > 0 && sleep_state_n_ == n && device_.device != nullptr;
   }
   void fetch_sleep_state(float* time, float* anchor, float* accel, int32_t* contacts);
-  // the substeps so far whose whole sleeping test the device made
+  // the substeps so far whose whole sleeping test the device made, and of those, the ones
+  // whose state the node gave (not held there) and the device carried instead of taking it up
+  // (the node's attributes as they came back, in the order the substep's start carried)
   size_t slept_on_device() const { return slept_device_; }
+  size_t sleep_states_carried() const { return sleep_carried_; }
   // Error control's motion measure (engine/motion_need.h) of the end held on the device
   // (end_held()), made there with the masses (awake), radii and forces this substep read, added
   // into *worst and *fall; false where the device cannot. The forces as the device took them:
@@ -424,6 +427,7 @@ class GrainsSolver {
   // what the last end there wrote (end_P_ and end_v_ hold the same floats), but for the grains
   // whose host values differ (carry_changed_), which go up alone; carried_: it was
   void carry_start(const SubstepContext& c);
+  bool carried_from_ = false;  // carry_start sent carry_from_: the grains in another order
   bool carried_ = false;
   // this substep's start is the end the device held (GrainsData::start_held), which d.P and
   // d.v do not hold: start_stays() says whether every stage reads it there, fetch_start()
@@ -459,7 +463,13 @@ class GrainsSolver {
   // the host compares are the grains' awake); the grains of the state there
   bool sleep_there_ = false, slept_there_ = false, sleep_changed_ = false;
   gr_sleep_params sleep_params_{};
-  size_t sleep_state_n_ = 0, slept_device_ = 0, motions_device_ = 0;
+  size_t sleep_state_n_ = 0, slept_device_ = 0, motions_device_ = 0, sleep_carried_ = 0;
+  // the state the device's last sleep_end left, as it came back (fetch_sleep_state), each of
+  // the four arrays whole (time, anchor, accel, contacts) or empty: what the node's attributes
+  // are where nothing wrote them since, which the device then carries (carry_sleep)
+  std::vector<float> sleep_back_time_, sleep_back_anchor_, sleep_back_accel_;
+  std::vector<int32_t> sleep_back_contacts_;
+  bool carry_sleep(const GrainsSleep& z);
   // the force the device read this substep (device_forces): any, one row for all (a copy here)
   bool force_there_ = false, force_uniform_ = false;
   float force_row_[3] = {0, 0, 0};

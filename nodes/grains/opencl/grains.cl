@@ -800,11 +800,11 @@ GR_INLINE gr_sleep gr_device_sleep(__global float* time, __global float* anchor,
   return s;
 }
 
-/* gr_k_sleep_begin: before the substep (gr_sleep_begin), from the start P (world) and the
- * velocities v: the start and the start velocity kept (start, start_v), the mass awake
- * (`awake`), and a sleeper made a fixed grain (mass, inverse mass and velocity 0). `changed`
- * is set where a grain sleeps this substep and did not the last, or the reverse (`prev`: the
- * last substep's are in asleep) */
+/* gr_k_sleep_begin: before the substep (gr_sleep_begin), from the start P (world; grain k's
+ * at row from[k] where `from` is set) and the velocities v: the start and the start velocity
+ * kept (start, start_v), the mass awake (`awake`), and a sleeper made a fixed grain (mass,
+ * inverse mass and velocity 0). `changed` is set where a grain sleeps this substep and did not
+ * the last, or the reverse (`prev`: the last substep's are in asleep) */
 __kernel void gr_k_sleep_begin(gr_sleep_params sp, __global const float* P, __global float* start,
                                __global float* v, __global float* start_v, __global float* mass,
                                __global float* awake, __global float* inv_mass,
@@ -812,13 +812,13 @@ __kernel void gr_k_sleep_begin(gr_sleep_params sp, __global const float* P, __gl
                                __global const float* force, int force_uniform,
                                __global float* time, __global float* anchor,
                                __global float* accel, __global uchar* asleep, int prev,
-                               __global int* changed, int n) {
+                               __global int* changed, int n, __global const gr_uint* from) {
   const int k = (int)get_global_id(0);
   gr_sleep s;
   gr_float3 p;
   int sleeps;
   if (k >= n) return;
-  p = gr_load3(P, k);
+  p = gr_load3(P, from ? (int)from[k] : k);
   gr_store3(start, k, p);
   gr_store3(start_v, k, gr_load3(v, k));
   awake[k] = mass[k];
@@ -846,6 +846,24 @@ __kernel void gr_k_sleep_settle(gr_sleep_params sp, __global float* P, __global 
   s = gr_device_sleep(0, 0, 0, 0, 0, awake, radius, force, force_uniform, start, start_v, asleep,
                       woken, fast);
   gr_sleep_settle(&sp, &s, k, P, v);
+}
+
+/* gr_k_sleep_carry: the sleeping test's state of n grains in a new order, grain k's from row
+ * from[k] of the state the last substep left (time, anchor, accel, contacts into the to_
+ * arrays) */
+__kernel void gr_k_sleep_carry(__global const gr_uint* from, __global const float* time,
+                               __global const float* anchor, __global const float* accel,
+                               __global const int* contacts, __global float* to_time,
+                               __global float* to_anchor, __global float* to_accel,
+                               __global int* to_contacts, int n) {
+  const int k = (int)get_global_id(0);
+  int j;
+  if (k >= n) return;
+  j = (int)from[k];
+  to_time[k] = time[j];
+  gr_store3(to_anchor, k, gr_load3(anchor, j));
+  gr_store3(to_accel, k, gr_load3(accel, j));
+  to_contacts[k] = contacts[j];
 }
 
 /* gr_k_sleep_update: the sleepers the rows wake (gr_sleep_rows_wake, no rows: none), then

@@ -117,6 +117,7 @@ Iterations::~Iterations() = default;
 void Iterations::begin_substep() {
   impl_->once.clear();
   impl_->p_taken = nullptr;
+  impl_->carry_from_n = 0;
 }
 
 bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
@@ -138,6 +139,7 @@ bool Iterations::carry_start(const float* P, const float* v, size_t n, const flo
   set_buffer(k, 5, v ? &m.end_v : nullptr);
   set_buffer(k, 6, v ? &m.velocity : nullptr);
   if (from) m.upload(m.carry_from, from->data(), n * sizeof(gr_uint));
+  m.carry_from_n = from ? n : 0;
   set_buffer(k, 8, from ? &m.carry_from : nullptr);
   m.launch(k, n);
   m.patch(start, P, changed, false, 0);

@@ -319,7 +319,8 @@ class Iterations {
   bool fetch_end(float* P, float* v, size_t n);
   // The grains node's sleeping test (kernels/sleep.h) on the device, around a substep whose
   // end stays there. sleep_begin(), after carry_start() and before predict(): each grain's
-  // start (world: `P`, n x 3, sent; null: what the last end wrote, carry_start's source) and
+  // start (world: `P`, n x 3, sent; null: what the last end wrote, carry_start's source, in
+  // the order carry_start sent, where it sent one, every grain found in that end) and
   // velocity kept, and a sleeper made a fixed grain in the arrays the substep reads (its mass,
   // inverse mass and velocity 0: g.mass, g.inv_mass and g.v are sent first, as predict() sends
   // them). The state (the node's attributes, n each: time, anchor x 3, accel x 3, contacts) goes
@@ -337,6 +338,13 @@ class Iterations {
   bool sleep_begin(const gr_grains& g, const gr_sleep_params& sp, size_t n, const float* P,
                    const uint8_t* can, const float* force, bool force_uniform,
                    const SleepState* state, bool* changed);
+  // The state the last sleep_end() left, of the grains of the last end there, carried into
+  // this substep's order of n grains before sleep_begin() (which then takes no `state`):
+  // through the order carry_start() sent this substep (grain i was grain from[i] of that end;
+  // each must be one), or as it stands where carry_start() kept the order. Nothing crosses.
+  // False, with nothing done, where the state is not of the last end's grains or the order is
+  // neither.
+  bool sleep_carry(size_t n);
   // sleep_end(), after the substep's end there (SequentialSolve::Finish) and before
   // end_bounds(): the sleepers put back or woken, each grain's stay counted, along the rows
   // the last search left here (device_rows: of n grains), else along `rows` (sent; null: no

@@ -4,6 +4,7 @@
 // nor the velocities cross for it.
 #include <algorithm>
 #include <cstdint>
+#include <utility>
 
 #include "nodes/grains/opencl/device_state.h"
 #include "nodes/grains/opencl/iterations.h"
@@ -30,7 +31,10 @@ bool Iterations::sleep_begin(const gr_grains& g, const gr_sleep_params& sp, size
                              bool force_uniform, const SleepState* state, bool* changed) {
   Impl& m = *impl_;
   m.sleep_begun = false;
-  if (n == 0 || !sleeps_there() || (!P && m.carry_n != n) || (!state && m.sleep_n != n))
+  // a start from the last end in carry_start's order, or in the end's
+  const bool reordered = !P && m.carry_from_n == n;
+  if (n == 0 || !sleeps_there() || (!P && !reordered && m.carry_n != n) ||
+      (!state && m.sleep_n != n))
     return false;
   const size_t f = sizeof(float);
   if (state) {
@@ -61,7 +65,7 @@ bool Iterations::sleep_begin(const gr_grains& g, const gr_sleep_params& sp, size
   m.sleep_force_uniform = force_uniform;
   m.sleep_force = force != nullptr;
   // sp, P, start, v, start_v, mass, awake, inv_mass, radius, can, force, force_uniform, time,
-  // anchor, accel, asleep, prev, changed, n
+  // anchor, accel, asleep, prev, changed, n, from
   cl_kernel k = m.kernel(m.sleep_begin, "gr_k_sleep_begin");
   const int count = static_cast<int>(n), uniform = force_uniform ? 1 : 0,
             prev = m.asleep_n == n ? 1 : 0;
@@ -73,12 +77,40 @@ bool Iterations::sleep_begin(const gr_grains& g, const gr_sleep_params& sp, size
   arg(k, 11, uniform), arg(k, 12, m.sleep_time), arg(k, 13, m.sleep_anchor);
   arg(k, 14, m.sleep_accel), arg(k, 15, m.sleep_asleep), arg(k, 16, prev);
   arg(k, 17, m.sleep_changed), arg(k, 18, count);
+  set_buffer(k, 19, reordered ? &m.carry_from : nullptr);
   m.launch(k, n);
   int flag = 0;
   m.download(m.sleep_changed, &flag, sizeof flag);
   *changed = flag != 0;
   m.asleep_n = n;
   m.sleep_begun = true;
+  return true;
+}
+
+bool Iterations::sleep_carry(size_t n) {
+  Impl& m = *impl_;
+  if (n == 0 || !sleeps_there() || m.sleep_n == 0 || m.sleep_n != m.carry_n) return false;
+  m.asleep_n = 0;  // a new order, maybe: no flags to compare with (as for a state sent)
+  if (m.carry_from_n == 0) return m.sleep_n == n;
+  if (m.carry_from_n != n) return false;
+  const size_t f = sizeof(float);
+  m.carry_time.reserve(m.ctx, n * f, m.largest);
+  m.carry_anchor.reserve(m.ctx, 3 * n * f, m.largest);
+  m.carry_accel.reserve(m.ctx, 3 * n * f, m.largest);
+  m.carry_contacts.reserve(m.ctx, n * sizeof(int32_t), m.largest);
+  // from, time, anchor, accel, contacts, to_time, to_anchor, to_accel, to_contacts, n
+  cl_kernel k = m.kernel(m.sleep_carry, "gr_k_sleep_carry");
+  const int count = static_cast<int>(n);
+  arg(k, 0, m.carry_from), arg(k, 1, m.sleep_time), arg(k, 2, m.sleep_anchor);
+  arg(k, 3, m.sleep_accel), arg(k, 4, m.sleep_contacts), arg(k, 5, m.carry_time);
+  arg(k, 6, m.carry_anchor), arg(k, 7, m.carry_accel), arg(k, 8, m.carry_contacts);
+  arg(k, 9, count);
+  m.launch(k, n);
+  std::swap(m.sleep_time, m.carry_time);
+  std::swap(m.sleep_anchor, m.carry_anchor);
+  std::swap(m.sleep_accel, m.carry_accel);
+  std::swap(m.sleep_contacts, m.carry_contacts);
+  m.sleep_n = n;
   return true;
 }
 

@@ -3,77 +3,30 @@
 // and velocities come back once a frame, or when another node reads them, and the frames are
 // the same bits as when they come back every substep.
 #include <catch2/catch.hpp>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "nodes/grains/grains_node.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "tests/nodes/grains/bin_scene.h"
 #include "tests/support/support.h"
 
 using namespace grains;
-using json = nlohmann::json;
 
 namespace {
 
-// 1,000 grains of 1 cm dropped in a bin 30 cm wide, its floor at height 0 and its centre
-// `far` from the world's origin along x and z, 4 substeps a frame (or error control's), with
-// use_opencl and no sleeping (whose test reads the positions every substep). With `probe` an
-// attribute node after the grains node sets the attribute "probe" to that expression each
-// substep: "$TX" reads every grain's position, which brings them back each time.
+// The bin (bin_scene.h) with its floor at height 0 and its centre `far` from the world's origin
+// along x and z, 8 frames, and no sleeping (whose test reads the positions every substep). With
+// `probe` an attribute node after the grains node sets the attribute "probe" to that expression
+// each substep: "$TX" reads every grain's position, which brings them back each time.
 Graph bin_graph(const char* probe, bool error_control, float far) {
-  auto plane = [&](const char* name, json normal, json at) {
-    return json{{"name", name},
-                {"type", "collider"},
-                {"params", {{"shape", "plane"}, {"normal", normal}, {"translate", at}}}};
-  };
-  json nodes = json::array(
-      {plane("ground", {0, 1, 0}, {far, 0, far}), plane("xm", {1, 0, 0}, {far - 0.15, 0, far}),
-       plane("xp", {-1, 0, 0}, {far + 0.15, 0, far}), plane("zm", {0, 0, 1}, {far, 0, far - 0.15}),
-       plane("zp", {0, 0, -1}, {far, 0, far + 0.15})});
-  nodes.push_back({{"name", "sand"},
-                   {"type", "source"},
-                   {"params",
-                    {{"shape", "box"},
-                     {"center", {far, 0.15, far}},
-                     {"size", {0.2, 0.2, 0.2}},
-                     {"separation", 0.02},
-                     {"jitter", 0.1}}}});
-  nodes.push_back({{"name", "gravity"},
-                   {"type", "force"},
-                   {"inputs", {"sand"}},
-                   {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}});
-  nodes.push_back({{"name", "grains"},
-                   {"type", "grains"},
-                   {"inputs", {"gravity"}},
-                   {"params",
-                    {{"particle_separation", 0.02},
-                     {"use_opencl", true},
-                     {"sleep_speed", 0},
-                     {"friction_with_particles", 1}}}});
-  std::string last = "grains";
-  if (probe) {
-    nodes.push_back({{"name", "probe"},
-                     {"type", "attribute"},
-                     {"inputs", {"grains"}},
-                     {"params", {{"attribute", "probe"}, {"value", probe}}}});
-    last = "probe";
-  }
-  nodes.push_back({{"name", "solver"},
-                   {"type", "solver"},
-                   {"inputs", {last}},
-                   {"params",
-                    {{"substeps", 4},
-                     {"error_control", error_control},
-                     {"colliders", {"ground", "xm", "xp", "zm", "zp"}}}}});
-  json g = {{"grains_graph", 1}, {"fps", 24}, {"frames", 8}, {"seed", 5}, {"nodes", nodes}};
-  return test::graph_from(g.dump(), test::source_dir() + "/tests/hold.json");
-}
-
-const GrainsSolver* solver_of(const Simulation& sim) {
-  for (const ChainNode& c : sim.object(0).chain)
-    if (const GrainsSolver* s = c.impl ? grains_solver(*c.impl) : nullptr) return s;
-  return nullptr;
+  test::BinScene b;
+  b.far = far;
+  b.sleeping = false;
+  b.probe = probe;
+  b.error_control = error_control;
+  b.file = "hold.json";
+  return test::bin_graph(b);
 }
 
 std::vector<float> array(const Simulation& sim, const char* name) {
@@ -119,16 +72,16 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
         CHECK(held.object(0).stats.substeps == speeds.object(0).stats.substeps);
         substeps += held.object(0).stats.substeps;
       }
-      REQUIRE(solver_of(speeds));
-      CHECK(solver_of(speeds)->motions_on_device() == 0);
-      REQUIRE(solver_of(tagged));
-      CHECK(solver_of(tagged)->held_starts() == solver_of(held)->held_starts());
+      REQUIRE(test::bin_solver(speeds));
+      CHECK(test::bin_solver(speeds)->motions_on_device() == 0);
+      REQUIRE(test::bin_solver(tagged));
+      CHECK(test::bin_solver(tagged)->held_starts() == test::bin_solver(held)->held_starts());
       CHECK(tagged.object(0).pts.f_if("probe")[7] ==
             2.0f * float(tagged.object(0).pts.i_if("id")[7]));
-      REQUIRE(solver_of(held));
-      REQUIRE(solver_of(probed));
-      const GrainsSolver& h = *solver_of(held);
-      const GrainsSolver& p = *solver_of(probed);
+      REQUIRE(test::bin_solver(held));
+      REQUIRE(test::bin_solver(probed));
+      const GrainsSolver& h = *test::bin_solver(held);
+      const GrainsSolver& p = *test::bin_solver(probed);
       // every end is held but, with error control, those of the substeps that keep their start
       // velocity (the first of a finer step: no velocity comes back), which also start from the
       // host's: each such substep costs at most its own held start and the next one's. Within a

@@ -2,85 +2,34 @@
 // the same decisions as the host's, bit for bit, with neither the positions nor the
 // velocities coming back for it, its state held on the device between substeps.
 #include <catch2/catch.hpp>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "nodes/grains/grains_node.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "tests/nodes/grains/bin_scene.h"
 #include "tests/support/support.h"
 
 using namespace grains;
-using json = nlohmann::json;
 
 namespace {
 
-// 1,000 grains of 1 cm dropped in a bin 30 cm wide, 4 substeps a frame (or error control's),
-// with use_opencl and the default sleeping. `pusher`: a ball of 4 cm radius that sweeps through
-// the pile along x from 0.7 s to 0.8 s of the run, still before and after (a moving collider's
-// wake test is the host's). `probe`: an attribute node after the grains node that sets "probe"
-// to that expression each substep.
+// The bin (bin_scene.h), the grains dropped from 2 cm lower, 36 frames, with the default
+// sleeping. `pusher`: the ball that sweeps through the pile at 0.7-0.8 s (a moving collider's
+// wake test is the host's). `probe`: an attribute node after the grains node that sets the
+// attribute `probed` to that expression each substep.
 constexpr int kFrames = 36;
 
-Graph sleep_graph(bool error_control, bool pusher, const char* probe) {
-  auto plane = [&](const char* name, json normal, json at) {
-    return json{{"name", name},
-                {"type", "collider"},
-                {"params", {{"shape", "plane"}, {"normal", normal}, {"translate", at}}}};
-  };
-  json nodes =
-      json::array({plane("ground", {0, 1, 0}, {0, 0, 0}), plane("xm", {1, 0, 0}, {-0.15, 0, 0}),
-                   plane("xp", {-1, 0, 0}, {0.15, 0, 0}), plane("zm", {0, 0, 1}, {0, 0, -0.15}),
-                   plane("zp", {0, 0, -1}, {0, 0, 0.15})});
-  json colliders = {"ground", "xm", "xp", "zm", "zp"};
-  if (pusher) {
-    nodes.push_back({{"name", "pusher"},
-                     {"type", "collider"},
-                     {"params",
-                      {{"shape", "sphere"},
-                       {"radius", 0.04},
-                       {"translate", {"-0.2 + 4 * min(max($ST - 0.7, 0), 0.1)", 0.04, 0}}}}});
-    colliders.push_back("pusher");
-  }
-  nodes.push_back({{"name", "sand"},
-                   {"type", "source"},
-                   {"params",
-                    {{"shape", "box"},
-                     {"center", {0, 0.12, 0}},
-                     {"size", {0.2, 0.2, 0.2}},
-                     {"separation", 0.02},
-                     {"jitter", 0.1}}}});
-  nodes.push_back({{"name", "gravity"},
-                   {"type", "force"},
-                   {"inputs", {"sand"}},
-                   {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}});
-  nodes.push_back(
-      {{"name", "grains"},
-       {"type", "grains"},
-       {"inputs", {"gravity"}},
-       {"params",
-        {{"particle_separation", 0.02}, {"use_opencl", true}, {"friction_with_particles", 1}}}});
-  std::string last = "grains";
-  if (probe) {
-    nodes.push_back({{"name", "probe"},
-                     {"type", "attribute"},
-                     {"inputs", {"grains"}},
-                     {"params", {{"attribute", "probe"}, {"value", probe}}}});
-    last = "probe";
-  }
-  nodes.push_back(
-      {{"name", "solver"},
-       {"type", "solver"},
-       {"inputs", {last}},
-       {"params", {{"substeps", 4}, {"error_control", error_control}, {"colliders", colliders}}}});
-  json g = {{"grains_graph", 1}, {"fps", 24}, {"frames", kFrames}, {"seed", 5}, {"nodes", nodes}};
-  return test::graph_from(g.dump(), test::source_dir() + "/tests/sleep.json");
-}
-
-const GrainsSolver* solver_of(const Simulation& sim) {
-  for (const ChainNode& c : sim.object(0).chain)
-    if (const GrainsSolver* s = c.impl ? grains_solver(*c.impl) : nullptr) return s;
-  return nullptr;
+Graph sleep_graph(bool error_control, bool pusher, const char* probe, const char* probed) {
+  test::BinScene b;
+  b.drop = 0.12;
+  b.pusher = pusher;
+  b.probe = probe;
+  b.probed = probed;
+  b.error_control = error_control;
+  b.frames = kFrames;
+  b.file = "sleep.json";
+  return test::bin_graph(b);
 }
 
 // what a frame leaves: positions, velocities and the sleeping test's state, in store order
@@ -107,24 +56,26 @@ Frame frame_of(const Simulation& sim) {
 
 struct Run {
   std::vector<Frame> frames;
-  size_t slept_there = 0, held_starts = 0, substeps = 0;
-  double received = 0;
+  size_t slept_there = 0, held_starts = 0, substeps = 0, carried = 0;
+  double received = 0, sent = 0;
 };
 
-Run run(bool error_control, bool pusher, const char* probe, bool host_sleep) {
+Run run(bool error_control, bool pusher, const char* probe, const char* probed, bool host_sleep) {
   test::ScopedEnv host("GRAINS_OPENCL_HOST_SLEEP", host_sleep ? "1" : "0");
-  Simulation sim(sleep_graph(error_control, pusher, probe), 1);
+  Simulation sim(sleep_graph(error_control, pusher, probe, probed), 1);
   Run r;
   for (int f = 0; f < kFrames; ++f) {
     sim.step_frame();
     r.frames.push_back(frame_of(sim));
     r.substeps += size_t(r.frames.back().substeps);
   }
-  const GrainsSolver* s = solver_of(sim);
+  const GrainsSolver* s = test::bin_solver(sim);
   REQUIRE(s);
   r.slept_there = s->slept_on_device();
   r.held_starts = s->held_starts();
   r.received = double(s->device_traffic().received);
+  r.sent = double(s->device_traffic().sent);
+  r.carried = s->sleep_states_carried();
   return r;
 }
 
@@ -132,8 +83,9 @@ Run run(bool error_control, bool pusher, const char* probe, bool host_sleep) {
 
 TEST_CASE("use_opencl: the sleeping test made on the device decides as the host's", "[opencl]") {
   // The bin's 36 frames (the grains fall, pile and, from about 0.7 s on, fall asleep), with and
-  // without error control, the ball's sweep through the pile, and the probe reading every
-  // grain's position each substep: the host's sleeping test (GRAINS_OPENCL_HOST_SLEEP=1) and
+  // without error control, the ball's sweep through the pile, a probe reading every grain's
+  // position each substep, and one writing every grain's sleeptime back (halved for 0.05 s)
+  // each substep: the host's sleeping test (GRAINS_OPENCL_HOST_SLEEP=1) and
   // the device's give the same positions, velocities and sleeping state after every frame, bit
   // for bit. The device makes every substep's test but those of the ball's sweep, whose wake
   // test is the host's, and, with error control, those of the substeps that keep their start
@@ -143,13 +95,18 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
   struct Case {
     bool control, pusher;
     const char* probe;
+    const char* probed = "probe";
   };
-  for (const Case c : {Case{true, false, nullptr}, Case{false, false, nullptr},
-                       Case{true, true, nullptr}, Case{true, false, "$TX"}}) {
+  // halves every grain's sleeptime from 0.9 s to 0.95 s, else writes it back as it was
+  const char* halve = "$ST > 0.9 && $ST < 0.95 ? @sleeptime * 0.5 : @sleeptime";
+  for (const Case c :
+       {Case{true, false, nullptr}, Case{false, false, nullptr}, Case{true, true, nullptr},
+        Case{true, false, "$TX"}, Case{false, false, halve, "sleeptime"}}) {
     INFO("error control " << c.control << ", pusher " << c.pusher << ", probe "
-                          << (c.probe ? c.probe : "none"));
-    const Run host = run(c.control, c.pusher, c.probe, true);
-    const Run device = run(c.control, c.pusher, c.probe, false);
+                          << (c.probe ? c.probe : "none") << " into " << c.probed);
+    const bool edits = std::string(c.probed) == "sleeptime";
+    const Run host = run(c.control, c.pusher, c.probe, c.probed, true);
+    const Run device = run(c.control, c.pusher, c.probe, c.probed, false);
     for (size_t f = 0; f < host.frames.size(); ++f) {
       INFO("frame " << f + 1);
       const Frame& a = host.frames[f];
@@ -189,12 +146,31 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
     // 64 work-items)
     const double saved = host.received - device.received;
     INFO(device.substeps << " substeps, " << device.slept_there << " slept there, "
-                         << device.held_starts << " started there, "
-                         << saved / (1000.0 * S) << " bytes a grain a substep less");
-    if (c.probe) {
+                         << device.carried << " carried, " << device.held_starts
+                         << " started there, " << saved / (1000.0 * S)
+                         << " bytes a grain a substep less");
+    // The test's state that the node gives the device (not held there: the frame's reader or
+    // another node fetched it) is carried there instead where it is what came back, grain for
+    // grain through the substep's order (GrainsSolver::carry_sleep): without error control,
+    // every frame's first substep but the run's first; with the probe that writes sleeptime
+    // back each substep, every substep but the run's first and those after the probe halved
+    // it (5 of them: 0.9 s < k / 96 s < 0.95 s).
+    if (!c.control && !c.probe) CHECK(device.carried == kFrames - 1);
+    if (edits) {
+      CHECK(device.carried + 1 + 5 >= device.substeps);
+      CHECK(device.carried + 2 <= device.substeps);
+    }
+    // A start carried there in the same order, every grain as the last end wrote it, is the
+    // sleeping test's start too: the positions that a probe fetches each substep do not go up
+    // again (12 bytes a grain a substep, more than all the host's test sends)
+    if (c.probe && !edits) CHECK(device.sent < host.sent);
+    // (the probe of sleeptime reads no position: the starts stay held)
+    if (c.probe && !edits) {
       CHECK(device.held_starts == 0);
     } else if (!c.pusher) {
       CHECK(device.held_starts + F + (c.control ? 2 * 6 * F : 0) >= S);
+    }
+    if (!c.probe && !c.pusher) {
       CHECK(saved >= 28.0 * 1000.0 * double(device.slept_there) - 56.0 * 1000.0 * F -
                          (1792.0 + 4.0 + (c.control ? 1024.0 : 0.0)) * S);
     }

@@ -471,14 +471,15 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       if (finished_there_) {
         device_.end_P_stale = device_.end_v_stale = false;  // this end replaces the last one
         end_P_.resize(3 * n);
-        end_v_.resize(c.s.keep_velocity ? 0 : 3 * n);
+        end_v_.resize(3 * n);
         end.P_out = end_P_.data();
-        end.v_out = c.s.keep_velocity ? nullptr : end_v_.data();
+        end.v_out = end_v_.data();
+        end.keep_velocity = c.s.keep_velocity;  // the start's, as the device holds them
         end.force = c.device_force;
         end.force_uniform = c.force_uniform;
         end.origin[0] = c.origin.x, end.origin[1] = c.origin.y, end.origin[2] = c.origin.z;
         // the final collision test there too, on the colliders the device's planes took (every
-        // one analytic; a mesh's distance is the host's), unless the start velocity is kept
+        // one analytic; a mesh's distance is the host's)
         collided_there_ = c.s.final_collision_test && planes_on_device_ && end.v_out;
         if (collided_there_) {
           end.colliders = plane_colliders_.data();

@@ -850,7 +850,7 @@ void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
 bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                                     size_t collider_count) {
   if (!s.use_opencl || s.contact_solver != kContactGaussSeidel || s.host_finish ||
-      s.keep_velocity || s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
+      s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
     return false;
   for (size_t c = 0; c < collider_count; ++c)
     if (!colliders[c].still()) return false;
@@ -1557,7 +1557,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     Vec3 b, v;
     if (there) {
       b = load3(end_P_.data(), i);
-      v = load3(s.keep_velocity ? d.v : end_v_.data(), i);
+      v = load3(end_v_.data(), i);  // a kept start velocity too (as the device held it)
     } else {
       gr_float3 Pk, vk;
       gr_update_velocity(&g, &prm, p, ii, &Pk, &vk);

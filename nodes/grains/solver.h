@@ -229,7 +229,7 @@ class GrainsSolver {
   size_t sleep_rows_device() const { return sleep_rows_device_; }
   // Whether the device can make the grains node's whole sleeping test around a substep with
   // these settings and colliders (GrainsData::sleep): gauss_seidel's substep on the device,
-  // ended there with its velocities (no kept start velocity, no host_finish), no global mass
+  // ended there with its velocities (no host_finish), no global mass
   // shock, no mesh collider and none that moves (whose wake test is the host's), a device with
   // the rows' kernels that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
   bool sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,

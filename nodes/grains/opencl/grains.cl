@@ -244,7 +244,7 @@ __kernel void gr_k_predict(gr_params prm, GR_GRAINS_ARGS, __global const float* 
 __kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v,
                           __global const float* force, int force_uniform, __global const float* p,
                           float origin_x, float origin_y, float origin_z, __global float* P_out,
-                          __global float* v_out, int n) {
+                          __global float* v_out, int n, int keep) {
   const int i = (int)get_global_id(0);
   if (i >= n) return;
   {
@@ -254,6 +254,7 @@ __kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v
     g.force = force;
     g.force_uniform = force_uniform;
     gr_update_velocity(&g, &prm, p, i, &end, &velocity);
+    if (keep) velocity = gr_load3(v, i); /* a kept start velocity (error control's stabilizing) */
     P_out[3 * i] = end.x + origin_x;
     P_out[3 * i + 1] = end.y + origin_y;
     P_out[3 * i + 2] = end.z + origin_z;

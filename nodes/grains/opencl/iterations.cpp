@@ -764,8 +764,8 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
 
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
   if (const SequentialSolve::Finish* end = w.finish) {
-    // the substep's end here: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n
-    // (the start velocities as pre-stabilization left them, or as they are)
+    // the substep's end here: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n,
+    // keep (the start velocities as pre-stabilization left them, or as they are)
     if (!velocities) m.upload_once(m.velocity, g.v, 3 * n * f);
     const int uniform = end->force_uniform ? 1 : 0;
     m.upload_once(m.force, end->force, (uniform ? 3 : 3 * n) * f);
@@ -782,6 +782,8 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     set_buffer(k, kFirstOwn + 7, &m.stats_P);
     set_buffer(k, kFirstOwn + 8, end->v_out ? &m.end_v : nullptr);
     check(clSetKernelArg(k, kFirstOwn + 9, sizeof(int), &count), "clSetKernelArg");
+    const int keep = end->keep_velocity ? 1 : 0;
+    check(clSetKernelArg(k, kFirstOwn + 10, sizeof(int), &keep), "clSetKernelArg");
     per_grain(k);
     if (final_test) {
       // the final collision test of what it wrote: prm, grains, colliders, count, start,

@@ -110,7 +110,8 @@ struct SequentialSolve {
   // The substep's end there (gr_k_finish: gr_update_velocity), instead of bringing back p, the
   // pre-stabilized start (x) and the velocities: each grain's written position, in world
   // coordinates (the substep's plus origin, as GrainsSolver::write_back adds them), into P_out
-  // and, when v_out is set, its velocity (3 n floats each). force: gr_grains' force as the
+  // and, when v_out is set, its velocity (3 n floats each; with keep_velocity the start's, as
+  // the device holds them, and not gr_update_velocity's). force: gr_grains' force as the
   // device reads it, a row a grain (3 n floats) or, with force_uniform, one row for every
   // grain; null: none. The written positions stay there for row_overlaps() (written_there).
   // With `colliders` (collider_count analytic colliders, the array the substep's find_planes()
@@ -119,6 +120,7 @@ struct SequentialSolve {
   struct Finish {
     float* P_out = nullptr;
     float* v_out = nullptr;
+    bool keep_velocity = false;
     const float* force = nullptr;
     bool force_uniform = false;
     float origin[3] = {0.0f, 0.0f, 0.0f};

@@ -76,8 +76,8 @@ TEST_CASE("use_opencl: the device ends the substep as the host does", "[opencl][
   // and with the velocity blended, capped in acceleration and speed, and a drift threshold, and
   // moved 96 m away along x and z (the substep's coordinates then have an origin of their own,
   // which the written positions add back: solver.cpp, local_origin); at
-  // rest with the start velocity kept (error control's first finer substep: no velocity comes
-  // back).
+  // rest with the start velocity kept (error control's first finer substep: the device writes
+  // the start's, the same bits, and its final collision test follows there).
   test::Scene sc = test::layered_block(true);
   int done = 0;
   for (const int settle : {30, 90}) {
@@ -101,6 +101,17 @@ TEST_CASE("use_opencl: the device ends the substep as the host does", "[opencl][
           start.P[3 * i] += 96.0f, start.P[3 * i + 2] += 96.0f;
       INFO("after " << settle << " substeps, variant " << variant);
       check_finish(start);
+      if (variant == 2) {
+        // the kept start velocity is written there as the host keeps it, bit for bit, and the
+        // final collision test against the ground follows there, as in any other substep
+        test::Scene host = start, device = start;
+        host.s.host_finish = true;
+        host.substep();
+        device.substep();
+        CHECK(device.solver.collided_on_device());
+        CHECK(device.v == host.v);
+        CHECK(device.P == host.P);
+      }
     }
   }
 }

@@ -82,16 +82,16 @@ TEST_CASE("use_opencl: the grains node holds its end on the device between subst
       REQUIRE(test::bin_solver(probed));
       const GrainsSolver& h = *test::bin_solver(held);
       const GrainsSolver& p = *test::bin_solver(probed);
-      // every end is held but, with error control, those of the substeps that keep their start
-      // velocity (the first of a finer step: no velocity comes back), which also start from the
-      // host's: each such substep costs at most its own held start and the next one's. Within a
-      // frame the count only doubles, from the 4 substeps to at most max_substeps' 256 (the
-      // first frame's coarsening aside, which refines none): at most 6 such substeps a frame
-      const int not_held = control ? substeps - int(h.held_ends()) : 0;
+      // every end is held, with error control those of the substeps that keep their start
+      // velocity too (the first of a finer step: the device's end writes it), which start from
+      // the host's: each costs its own held start. Within a frame the count only doubles, from
+      // the 4 substeps to at most max_substeps' 256 (the first frame's coarsening aside, which
+      // refines none): at most 6 such substeps a frame
+      const int not_held = control ? 6 * 8 : 0;
+      CHECK(h.held_ends() == size_t(substeps));
       CHECK(h.held_ends() == p.held_ends());
-      CHECK(not_held <= 6 * 8);
       if (!control) CHECK(h.held_starts() == size_t(substeps - 8));
-      CHECK(h.held_starts() >= size_t(substeps - 8 - 2 * not_held));
+      CHECK(h.held_starts() >= size_t(substeps - 8 - not_held));
       CHECK(p.held_starts() == 0);
       const double saved =
           double(p.device_traffic().received) - double(h.device_traffic().received);

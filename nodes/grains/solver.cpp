@@ -942,12 +942,14 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
 
 // A start held on the device (GrainsData::start_held) stays there where no stage reads the start
 // here: the device predicts (GrainsSolver::predict), finds the planes (no mesh collider) and
-// solves; no global mass shock, constraint or shape reads the start positions, and the velocity
-// is not kept. A stage that reads it anyway (the host's search of rows, host_p) brings it then.
+// solves; no global mass shock, constraint or shape reads the start positions. A kept start
+// velocity (error control's stabilizing substep) is the device's too: its end writes the one it
+// holds (SequentialSolve::Finish::keep_velocity). A stage that reads the start anyway (the
+// host's search of rows, host_p) brings it then.
 bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
                                const ColliderState* colliders, size_t collider_count) const {
   return s.use_opencl && s.contact_solver == kContactGaussSeidel && !s.resend_start &&
-         !s.keep_velocity && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
+         s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
          !any_mesh(colliders, collider_count);
 }
 

@@ -359,15 +359,13 @@ class GrainsNode : public Node {
       if (there) return (row_words_[k] & GR_SLEEP_FAST) != 0;
       return sleep_row_fast_near(*rows, P_.data(), r_.data(), fast_.data(), k, GR_SLEEP_NEAR);
     };
-    const float dt = st.dt;
     for (const ColliderState& col : colliders) {
       if (col.still()) continue;
-      for (size_t k = 0; k < n; ++k) {
-        if (!asleep_[k] || woken_[k]) continue;
-        const Vec3 p = load3(P_.data(), k);
-        const float reach = 1.05f * r_[k] + length(col.velocity_at(p)) * dt;
-        if (col.distance(p, nullptr, 2.0f * reach) < reach) woken_[k] = 1;
-      }
+      const gr_collider c = to_gr(col);
+      for (size_t k = 0; k < n; ++k)
+        if (asleep_[k] && !woken_[k] &&
+            sleep_collider_near(sp, sleep_, k, c, col.shape.mesh.get(), P_.data()))
+          woken_[k] = 1;
     }
     if (there || rows) {
       for (size_t k = 0; k < n; ++k) {

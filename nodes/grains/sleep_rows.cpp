@@ -27,6 +27,11 @@ bool sleep_stay(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const fl
   return gr_sleep_stay(&sp, &s, static_cast<int>(k), P, v) != 0;
 }
 
+bool sleep_collider_near(const gr_sleep_params& sp, const gr_sleep& s, size_t k,
+                         const gr_collider& c, const void* mesh, const float* P) {
+  return gr_sleep_collider_near(&sp, &s, static_cast<int>(k), &c, P, mesh) != 0;
+}
+
 float rows_moved2(const float* p, const float* b, size_t n, int threads) {
   float moved2 = 0.0f;
   const long ln = static_cast<long>(n);

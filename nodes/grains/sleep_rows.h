@@ -25,6 +25,10 @@ bool sleep_row_fast_near(const NeighborList& rows, const float* P, const float* 
 bool sleep_begin(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P);
 bool sleep_settle(const gr_sleep_params& sp, const gr_sleep& s, size_t k, float* P, float* v);
 bool sleep_stay(const gr_sleep_params& sp, const gr_sleep& s, size_t k, const float* P, float* v);
+// whether collider c (which moved this substep; `mesh` its mesh, or null) reaches grain k at
+// its end P (gr_sleep_collider_near), made as a device makes it
+bool sleep_collider_near(const gr_sleep_params& sp, const gr_sleep& s, size_t k,
+                         const gr_collider& c, const void* mesh, const float* P);
 
 // the largest squared distance between the positions p and b (n x 3 each) of one grain
 // (gr_rows_moved), over `threads` threads: the same float whatever their number

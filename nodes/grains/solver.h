@@ -230,8 +230,8 @@ class GrainsSolver {
   // Whether the device can make the grains node's whole sleeping test around a substep with
   // these settings and colliders (GrainsData::sleep): gauss_seidel's substep on the device,
   // ended there with its velocities (no host_finish), no global mass
-  // shock, no mesh collider and none that moves (whose wake test is the host's), a device with
-  // the rows' kernels that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
+  // shock, no mesh collider (whose distance is the host's), a device with the rows' kernels
+  // that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
   bool sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                         size_t collider_count);
   // whether the device holds the test's state of n grains, as the last substep left it, and
@@ -463,6 +463,9 @@ class GrainsSolver {
   // the host compares are the grains' awake); the grains of the state there
   bool sleep_there_ = false, slept_there_ = false, sleep_changed_ = false;
   gr_sleep_params sleep_params_{};
+  // the colliders that moved this substep, which sleep_end sends (kept until the next substep,
+  // as every host array a transfer reads)
+  std::vector<gr_collider> sleep_moving_;
   size_t sleep_state_n_ = 0, slept_device_ = 0, motions_device_ = 0, sleep_carried_ = 0;
   // the state the device's last sleep_end left, as it came back (fetch_sleep_state), each of
   // the four arrays whole (time, anchor, accel, contacts) or empty: what the node's attributes

@@ -12,6 +12,12 @@
 #ifndef GRAINS_KERNELS_SLEEP_H
 #define GRAINS_KERNELS_SLEEP_H
 #include "row_stats.h"
+/* the device's program holds engine/collider_shape.h beside the kernel headers */
+#if defined(GR_OPENCL)
+#include "collider_shape.h"
+#else
+#include "engine/collider_shape.h"
+#endif
 
 typedef struct {
   float dt;         /* the substep (s) */
@@ -122,6 +128,21 @@ GR_INLINE int gr_sleep_settle(const gr_sleep_params* sp, const gr_sleep* s, int 
     s->fast[k] = speed > gr_sleep_wake_speed(sp, s, k);
   }
   return 0;
+}
+
+/* Whether collider c, which moved over the substep, reaches grain k at its end P (world, after
+ * gr_sleep_settle): within 1.05 r_k plus the way its material there went in the substep. A
+ * sleeper it reaches wakes, at its start or end pose alike (a floor that drops away leaves
+ * none hanging). */
+GR_INLINE int gr_sleep_collider_near(const gr_sleep_params* sp, const gr_sleep* s, int k,
+                                     const gr_collider* c, const GR_GLOBAL float* P GR_MESH_PARAM) {
+  GR_ROW_EXACT
+  float x[3], vc[3];
+  float reach;
+  x[0] = P[3 * k], x[1] = P[3 * k + 1], x[2] = P[3 * k + 2];
+  gr_collider_velocity(c, x, vc);
+  reach = 1.05f * s->radius[k] + gr_sleep_length(vc[0], vc[1], vc[2]) * sp->dt;
+  return gr_collider_distance_within(c, x, 0, 2.0f * reach GR_MESH_ARG(mesh)) < reach;
 }
 
 /* A sleeper not yet woken wakes when a contact it slept on is gone (`kept`: the grains within

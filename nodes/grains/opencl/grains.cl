@@ -867,8 +867,9 @@ __kernel void gr_k_sleep_carry(__global const gr_uint* from, __global const floa
   to_contacts[k] = contacts[j];
 }
 
-/* gr_k_sleep_update: the sleepers the rows wake (gr_sleep_rows_wake, no rows: none), then
- * each grain's stay (gr_sleep_stay), its contacts noted where it falls asleep */
+/* gr_k_sleep_update: the sleepers the colliders that moved wake (gr_sleep_collider_near, in
+ * their order), those the rows wake (gr_sleep_rows_wake, no rows: none), then each grain's stay
+ * (gr_sleep_stay), its contacts noted where it falls asleep */
 __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __global float* v,
                                 __global const float* radius, __global const gr_uint* offsets,
                                 __global const gr_uint* indices, __global const float* awake,
@@ -876,12 +877,18 @@ __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __g
                                 int force_uniform, __global float* time, __global float* anchor,
                                 __global float* accel, __global int* contacts,
                                 __global uchar* asleep, __global uchar* woken,
-                                __global const uchar* fast, int n) {
+                                __global const uchar* fast, int n,
+                                __global const gr_collider* colliders, int collider_count) {
   const int k = (int)get_global_id(0);
   gr_sleep s;
+  int c;
   if (k >= n) return;
   s = gr_device_sleep(time, anchor, accel, contacts, can, awake, radius, force, force_uniform, 0,
                       0, asleep, woken, 0);
+  for (c = 0; c < collider_count && asleep[k] && !woken[k]; ++c) {
+    const gr_collider col = colliders[c];
+    if (gr_sleep_collider_near(&sp, &s, k, &col, P)) woken[k] = 1;
+  }
   if (offsets && asleep[k] && !woken[k])
     gr_sleep_rows_wake(&s, k, (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_KEPT),
                        gr_row_fast_near(P, radius, offsets, indices, fast, k, GR_SLEEP_NEAR));

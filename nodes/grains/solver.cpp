@@ -1452,6 +1452,9 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
   ps.clumping_weight = 0.0f;
   gr_grains gs = g;
   if (!pairs) gs.nbr_offsets = nullptr;
+  // no friction here: the contacts' carried slips are not read (nor sent to the device, 12
+  // bytes an entry of the rows and planes)
+  gs.pair_slip = gs.plane_slip = nullptr;
   P_stable_.resize(3 * n + 1);
   p_stable_next_.resize(3 * n + 1);
   std::copy(P0_, P0_ + 3 * n, P_stable_.begin());

@@ -63,3 +63,39 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
   CHECK(built >= 10);
   CHECK(kept >= 10);
 }
+
+TEST_CASE("use_opencl: the Jacobi path's pre-stabilization sends no contact history",
+          "[opencl][jacobi]") {
+  // Two copies of the 512 falling grains with contact_solver jacobi (friction on: each substep
+  // loads the contacts' carried slips, 12 B a row entry and a plane entry) run the same 48
+  // substeps, the same bits; then one pre-stabilizes its next substep and the other does not.
+  // Pre-stabilizing sends at most the start it moves (12 B a grain, and one float), the
+  // pre-stabilized start the iterations then read (as much again), the neighbour rows (4 B a
+  // grain and an entry), the planes (4 B a grain, 36 an entry) and 1 KiB of flags; its passes
+  // read no slip (gr_stabilize: no friction), so the slips go up once, with the iterations'
+  // call, in both (else 12 B an entry more).
+  test::Scene a = test::layered_block(true), b = test::layered_block(true);
+  for (test::Scene* sc : {&a, &b}) sc->s.contact_solver = kContactJacobi;
+  for (int k = 0; k < 48; ++k) a.substep(), b.substep();
+  REQUIRE(a.P == b.P);
+  REQUIRE(a.v == b.v);
+  const double n = double(a.size());
+  a.s.pre_stabilization = true;
+  b.s.pre_stabilization = false;
+  const opencl::Traffic a0 = a.solver.device_traffic(), b0 = b.solver.device_traffic();
+  a.substep();
+  b.substep();
+  const double sent_a = double(a.solver.device_traffic().sent - a0.sent),
+               sent_b = double(b.solver.device_traffic().sent - b0.sent);
+  REQUIRE(a.solver.candidates());
+  const double rows = double(a.solver.candidates()->indices.size());
+  const double planes = double(a.solver.collider_planes().offsets->back());
+  INFO(rows / n << " row entries and " << planes / n
+                << " plane entries a grain; pre-stabilization sent " << (sent_a - sent_b) / n
+                << " B a grain");
+  CHECK(a.solver.stabilize_passes() > 0);
+  // the slips of the rows alone would pass the bound below
+  const double most = 2 * (12 * n + 4) + 4 * (n + 1 + rows) + 4 * (n + 1) + 36 * planes + 1024;
+  CHECK(12 * rows > most);
+  CHECK(sent_a - sent_b <= most);
+}

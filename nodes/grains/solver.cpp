@@ -1513,15 +1513,12 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   // the box of what the end wrote is measured
   if (sleep_there_) {
     const bool device_rows = candidates_on_ && device_.rows_stale;
-    // the colliders that moved this substep wake the sleepers they reach (analytic, as every
-    // collider of a test made there)
-    sleep_moving_.clear();
-    for (size_t c = 0; c < collider_count; ++c)
-      if (!colliders[c].still()) sleep_moving_.push_back(to_gr(colliders[c]));
-    if (!finished_there_ ||
+    // the colliders that moved this substep wake the sleepers they reach: the device's planes
+    // took every collider (analytic, as every collider of a test made there)
+    if (!finished_there_ || (collider_count > 0 && !planes_on_device_) ||
         !device_.device->sleep_end(sleep_params_, d.n, device_rows,
                                    candidates_on_ && !device_rows ? &neighbors_ : nullptr,
-                                   sleep_moving_.data(), sleep_moving_.size()))
+                                   plane_colliders_.data(), collider_count))
       throw std::logic_error("grains: the device cannot end the sleeping test it began");
     sleep_back_time_.clear(), sleep_back_anchor_.clear(), sleep_back_accel_.clear();
     sleep_back_contacts_.clear();

@@ -463,9 +463,6 @@ class GrainsSolver {
   // the host compares are the grains' awake); the grains of the state there
   bool sleep_there_ = false, slept_there_ = false, sleep_changed_ = false;
   gr_sleep_params sleep_params_{};
-  // the colliders that moved this substep, which sleep_end sends (kept until the next substep,
-  // as every host array a transfer reads)
-  std::vector<gr_collider> sleep_moving_;
   size_t sleep_state_n_ = 0, slept_device_ = 0, motions_device_ = 0, sleep_carried_ = 0;
   // the state the device's last sleep_end left, as it came back (fetch_sleep_state), each of
   // the four arrays whole (time, anchor, accel, contacts) or empty: what the node's attributes

@@ -185,13 +185,13 @@ struct Iterations::Impl {
   // the sleeping test (opencl/sleep.cpp): its kernels, the state of sleep_n grains (time,
   // anchor, accel, contacts), the last sleep_begin's starts, start velocities, masses awake,
   // whether each may sleep and sleeps (of asleep_n grains), the end's woken and `changed`
-  // flags, rows sent from the host and the colliders that moved; the state carried into a new
-  // order through carry_from (Iterations::sleep_carry: the carry_ arrays, then swapped)
+  // flags, and rows sent from the host; the state carried into a new order through carry_from
+  // (Iterations::sleep_carry: the carry_ arrays, then swapped)
   cl_kernel sleep_begin = nullptr, sleep_settle = nullptr, sleep_update = nullptr;
   cl_kernel sleep_carry = nullptr;
   Buffer sleep_time, sleep_anchor, sleep_accel, sleep_contacts, sleep_start, sleep_start_v,
       sleep_mass, sleep_can, sleep_asleep, sleep_woken, sleep_changed, sleep_offsets,
-      sleep_indices, sleep_colliders, carry_time, carry_anchor, carry_accel, carry_contacts;
+      sleep_indices, carry_time, carry_anchor, carry_accel, carry_contacts;
   size_t sleep_n = 0, asleep_n = 0;
   size_t carry_from_n = 0;  // carry_from holds this substep's order, of this many grains
   bool sleep_can_all = true, sleep_force = false, sleep_force_uniform = false;
@@ -252,7 +252,7 @@ struct Iterations::Impl {
                       &carry_from, &sleep_time, &sleep_anchor, &sleep_accel,
                       &sleep_contacts, &sleep_start, &sleep_start_v, &sleep_mass, &sleep_can,
                       &sleep_asleep, &sleep_woken, &sleep_changed, &sleep_offsets,
-                      &sleep_indices, &sleep_colliders, &carry_time, &carry_anchor, &carry_accel,
+                      &sleep_indices, &carry_time, &carry_anchor, &carry_accel,
                       &carry_contacts, &motion_part,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
       b->release();

@@ -867,8 +867,8 @@ __kernel void gr_k_sleep_carry(__global const gr_uint* from, __global const floa
   to_contacts[k] = contacts[j];
 }
 
-/* gr_k_sleep_update: the sleepers the colliders that moved wake (gr_sleep_collider_near, in
- * their order), those the rows wake (gr_sleep_rows_wake, no rows: none), then each grain's stay
+/* gr_k_sleep_update: the sleepers the colliders that moved wake (gr_sleep_collider_near; the
+ * still ones are skipped), those the rows wake (gr_sleep_rows_wake, no rows: none), then each grain's stay
  * (gr_sleep_stay), its contacts noted where it falls asleep */
 __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __global float* v,
                                 __global const float* radius, __global const gr_uint* offsets,
@@ -887,7 +887,7 @@ __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __g
                       0, asleep, woken, 0);
   for (c = 0; c < collider_count && asleep[k] && !woken[k]; ++c) {
     const gr_collider col = colliders[c];
-    if (gr_sleep_collider_near(&sp, &s, k, &col, P)) woken[k] = 1;
+    if (!gr_collider_still(&col) && gr_sleep_collider_near(&sp, &s, k, &col, P)) woken[k] = 1;
   }
   if (offsets && asleep[k] && !woken[k])
     gr_sleep_rows_wake(&s, k, (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_KEPT),

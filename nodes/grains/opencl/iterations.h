@@ -348,12 +348,13 @@ class Iterations {
   // neither.
   bool sleep_carry(size_t n);
   // sleep_end(), after the substep's end there (SequentialSolve::Finish) and before
-  // end_bounds(): the sleepers put back or woken, by the `moving` colliders (analytic, each of
-  // which moved this substep; sent, 136 bytes each) and along the rows the last search left
-  // here (device_rows: of n grains), else along `rows` (sent; null: no rows), and each grain's
-  // stay counted. False where no sleep_begin() of n grains came first or the end is not there.
+  // end_bounds(): the sleepers put back or woken, by those of the substep's `colliders` that
+  // moved (the array find_planes() sent: nothing goes up again) and along the rows the last
+  // search left here (device_rows: of n grains), else along `rows` (sent; null: no rows), and
+  // each grain's stay counted. False where no sleep_begin() of n grains came first or the end
+  // is not there.
   bool sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows, const NeighborList* rows,
-                 const gr_collider* moving = nullptr, size_t moving_count = 0);
+                 const gr_collider* colliders = nullptr, size_t collider_count = 0);
   // the state the last sleep_end() left, into the host arrays given (n, n x 3, n x 3, n; any
   // null); false where it is not of n grains
   bool fetch_sleep(float* time, float* anchor, float* accel, int32_t* contacts, size_t n);

@@ -115,8 +115,8 @@ bool Iterations::sleep_carry(size_t n) {
 }
 
 bool Iterations::sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows,
-                           const NeighborList* rows, const gr_collider* moving,
-                           size_t moving_count) {
+                           const NeighborList* rows, const gr_collider* colliders,
+                           size_t collider_count) {
   Impl& m = *impl_;
   if (!m.sleep_begun || n == 0 || m.asleep_n != n || m.sleep_n != n || m.carry_n != n ||
       m.carry_v_n != n || (device_rows && !(m.rows_found && m.rows_grains == n)))
@@ -144,9 +144,11 @@ bool Iterations::sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows
   arg(settle, 9, m.sleep_asleep), arg(settle, 10, m.sleep_woken), arg(settle, 11, m.sleep_fast);
   arg(settle, 12, count);
   m.launch(settle, n);
-  if (!moving) moving_count = 0;
-  if (moving_count) m.upload(m.sleep_colliders, moving, moving_count * sizeof(gr_collider));
-  const int colliders = static_cast<int>(moving_count);
+  // (sent once a substep, with the planes)
+  if (!colliders) collider_count = 0;
+  if (collider_count)
+    m.upload_once(m.plane_colliders, colliders, collider_count * sizeof(gr_collider));
+  const int count_colliders = static_cast<int>(collider_count);
   // sp, P, v, radius, offsets, indices, awake, can, force, force_uniform, time, anchor, accel,
   // contacts, asleep, woken, fast, n, colliders, collider_count
   cl_kernel update = m.kernel(m.sleep_update, "gr_k_sleep_update");
@@ -157,8 +159,8 @@ bool Iterations::sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows
   arg(update, 9, uniform), arg(update, 10, m.sleep_time), arg(update, 11, m.sleep_anchor);
   arg(update, 12, m.sleep_accel), arg(update, 13, m.sleep_contacts);
   arg(update, 14, m.sleep_asleep), arg(update, 15, m.sleep_woken), arg(update, 16, m.sleep_fast);
-  arg(update, 17, count), set_buffer(update, 18, moving_count ? &m.sleep_colliders : nullptr);
-  arg(update, 19, colliders);
+  arg(update, 17, count), set_buffer(update, 18, collider_count ? &m.plane_colliders : nullptr);
+  arg(update, 19, count_colliders);
   m.launch(update, n);
   return true;
 }

@@ -94,7 +94,7 @@ TEST_CASE("use_opencl: the Jacobi path's pre-stabilization sends no contact hist
                 << " plane entries a grain; pre-stabilization sent " << (sent_a - sent_b) / n
                 << " B a grain");
   CHECK(a.solver.stabilize_passes() > 0);
-  // the slips of the rows alone would pass the bound below
+  // the rows' slips alone are more than the bound allows: sending them fails it
   const double most = 2 * (12 * n + 4) + 4 * (n + 1 + rows) + 4 * (n + 1) + 36 * planes + 1024;
   CHECK(12 * rows > most);
   CHECK(sent_a - sent_b <= most);

@@ -1280,6 +1280,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.pair_entries = c.g.nbr_offsets ? neighbors_.offsets.back() : 0;
   size.plane_entries = c.g.plane_offsets ? plane_offsets_[n_] : 0;
   size.planes_there = planes_on_device_;
+  size.rows_there = rows_on_device_;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;

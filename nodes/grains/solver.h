@@ -190,6 +190,8 @@ class GrainsSolver {
   size_t contact_lists_built_on_device() const { return seq_lists_device_; }
   // use_opencl: the neighbour searches whose rows' indices stayed on the device (rows_stay)
   size_t rows_left_on_device() const { return rows_left_; }
+  // use_opencl: the last substep's rows are those its device's search found (rows_on_device_)
+  bool rows_from_device() const { return rows_on_device_; }
   const std::vector<gr_seq_contact>& contact_list() const {
     sync_contacts();
     return seq_;
@@ -403,7 +405,7 @@ class GrainsSolver {
   };
   DeviceSlot device_;
   // use_opencl: neighbors_ holds the rows the device's last search gave, unchanged (kept across
-  // substeps with them), which the device's contact list build then reads where they are
+  // substeps with them), which the device's contact list build and solve then read where they are
   bool rows_on_device_ = false;
   // this substep's predicted positions p_ went to the device with its search of rows or
   // planes, or the device made them (predicted_there_), unchanged since (the search, the planes

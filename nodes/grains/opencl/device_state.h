@@ -290,15 +290,28 @@ struct Iterations::Impl {
     auto of_b = [&](const Once& h) { return h.buffer == &b; };
     once.erase(std::remove_if(once.begin(), once.end(), of_b), once.end());
   }
-  // upload(), skipped when b holds these bytes of this host array from earlier in the substep
-  void upload_once(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
-    if (!host) return;
+  // whether b holds these bytes of this host array from earlier in the substep
+  bool holds(const Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) const {
     for (const Once& h : once)
       if (h.buffer == &b && h.mem == b.mem && h.host == host && h.bytes == bytes &&
           b.capacity >= std::max(bytes, device_bytes))
-        return;
+        return true;
+    return false;
+  }
+  // upload(), skipped when b holds() them
+  void upload_once(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
+    if (!host || holds(b, host, bytes, device_bytes)) return;
     upload(b, host, bytes, device_bytes);
     once.push_back({&b, b.mem, host, bytes});
+  }
+  // upload_once() of a host array whose bytes `from` holds on the device already: copied there
+  void copy_once(Buffer& b, const Buffer& from, const void* host, size_t bytes) {
+    if (!host || holds(b, host, bytes)) return;
+    b.reserve(ctx, bytes, largest);
+    if (bytes > 0)
+      check(clEnqueueCopyBuffer(queue, from.mem, b.mem, 0, 0, bytes, 0, nullptr, nullptr),
+            "clEnqueueCopyBuffer");
+    copied_once(b, host, bytes);
   }
   // upload_once()'s record that b holds the host array `host` (bytes of it) copied there on the
   // device from another buffer

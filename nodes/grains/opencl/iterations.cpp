@@ -255,11 +255,17 @@ bool Iterations::builds_contacts() const {
 void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& size,
                                      const float* positions, HostArray* a, bool rows_only) {
   grain_arrays(g, size, a);
+  // the rows the device's search left where they are (size.rows_there): copied there
+  const bool rows_there = size.rows_there && rows_found && rows_grains == size.n;
   // positions: one float past the last grain, as the contact loop's block loads read
   for (int k = 0; k < kArrays; ++k) {
     if (!((!rows_only || k == kNbrOffsets || k == kNbrIndices) &&
           !(size.planes_there && (k == kPlaneOffsets || k == kPlane))))
       continue;
+    if (rows_there && (k == kNbrOffsets || k == kNbrIndices)) {
+      copy_once(arrays[k], k == kNbrOffsets ? nb_offsets : nb_indices, a[k].host, a[k].bytes);
+      continue;
+    }
     const size_t device_bytes = k == kP ? a[k].bytes + sizeof(float) : 0;
     // the rows and the planes (and their slips) may be found again within the substep
     const bool same_all_substep = k != kNbrOffsets && k != kNbrIndices && k != kPairSlip &&

@@ -41,6 +41,9 @@ struct IterationSizes {
   // the device holds the substep's collider planes as its find_planes() left them: the plane
   // rows, entries and colliders do not go up again
   bool planes_there = false;
+  // the device's last neighbour search found the rows (g's nbr_offsets and nbr_indices, as it
+  // gave them): they do not go up, the device copies them where the solve reads them
+  bool rows_there = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)

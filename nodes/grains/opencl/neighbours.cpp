@@ -114,6 +114,9 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   m.rows_found = false;
   m.rows_grains = n;
+  // the rows copied from the last search's (Impl::upload_grains) are no longer the host's
+  m.forget(m.arrays[kNbrOffsets]);
+  m.forget(m.arrays[kNbrIndices]);
   m.searched_n = 0;
   if (n >= size_t(std::numeric_limits<int>::max()) / 3) return false;
   m.open_neighbours();

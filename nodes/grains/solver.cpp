@@ -44,6 +44,7 @@
 #include "nodes/grains/kernels/iterate.h"
 #include "nodes/grains/kernels/row_stats.h"
 static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slots = planes");
+#include "nodes/grains/history.h"
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
 #include "nodes/grains/opencl/iterations.h"
@@ -451,6 +452,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
   device.reset();
   holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
+  hist_stale = slips_stale = slips_there = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -469,6 +471,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   holds_contacts = o.holds_contacts;
   stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
+  hist_stale = slips_stale = slips_there = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -502,6 +505,20 @@ void GrainsSolver::sync_rows() const {
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
   self.device_.device->fetch_rows(self.neighbors_);
   self.device_.rows_stale = false;
+}
+
+void GrainsSolver::sync_history() const {
+  if (!device_.hist_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_pair_history(self.hist_slip_.data());
+  self.device_.hist_stale = false;
+}
+
+void GrainsSolver::sync_slips() const {
+  if (!device_.slips_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_pair_slips(self.pair_slip_.data(), pair_slip_.size() / 3);
+  self.device_.slips_stale = false;
 }
 
 void GrainsSolver::sync_planes() const {
@@ -547,6 +564,8 @@ const float* GrainsSolver::end_velocities() {
 void GrainsSolver::sync_device() const {
   sync_end(true, true);
   sync_rows();
+  sync_history();
+  sync_slips();
   sync_rows_p();
   sync_planes();
   sync_contacts();
@@ -562,6 +581,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   finished_there_ = collided_there_ = carried_ = carried_from_ = end_stays_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
+  // the last substep's carried slips are done with (its saved ones stay)
+  device_.slips_stale = device_.slips_there = false;
   slept_there_ = sleep_there_;
   sleep_there_ = sleep_changed_ = force_there_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
@@ -603,7 +624,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   const bool history = (c.pair_friction_pass || c.collider_friction_pass) &&
                        s.contact_solver != kContactGaussSeidel;
   if (history) {
-    load_history(d, c.pair_friction_pass, c.collider_friction_pass, c.same_rows, c.threads);
+    load_history(d, c.pair_friction_pass, c.collider_friction_pass, c.same_rows, c.threads,
+                 s.use_opencl && !s.host_history ? &c : nullptr);
     if (c.pair_friction_pass) g.pair_slip = pair_slip_.data();
     if (c.collider_friction_pass) g.plane_slip = plane_slip_.data();
   }
@@ -632,9 +654,10 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   write_back(d, s, g, prm, colliders, collider_count, c.origin, c.impacts, c.threads);
 
   if (history)
-    save_history(d, s, g, prm, p_.data(), c.pair_friction_pass, c.collider_friction_pass, c.threads);
+    save_history(d, s, g, prm, p_.data(), c.pair_friction_pass, c.collider_friction_pass, c.threads,
+                 s.use_opencl && !s.host_history ? &c : nullptr);
   else
-    hist_id_.clear(), hist_slip_.clear();
+    hist_id_.clear(), hist_slip_.clear(), device_.hist_stale = false;
 
   // 5. strain, breaking, strands
   if (c.constraints_on) update_constraints(d, s, c.threads, stats);
@@ -1155,6 +1178,8 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     old.swap(pair_normal_);
     pair_normal_.assign(entries, 0u);
     std::vector<float> old_slip;
+    sync_slips();  // the device's, where it made them
+    device_.slips_there = false;
     old_slip.swap(pair_slip_);
     pair_slip_.assign(3 * entries, 0.0f);
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -1258,6 +1283,7 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
   open_device().run(gd, c.prm, device_sizes(c), x, c.acc, count, whole ? friction_pass : friction_after,
                     whole ? c.s.accurate_friction : false);
+  if (gd.pair_slip) device_.slips_there = true;  // sent with it, or there already
 }
 
 // the predicted positions for a device's call that takes them where the device holds them (its
@@ -1281,6 +1307,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.plane_entries = c.g.plane_offsets ? plane_offsets_[n_] : 0;
   size.planes_there = planes_on_device_;
   size.rows_there = rows_on_device_;
+  size.slips_there = device_.slips_there;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;
@@ -1774,6 +1801,7 @@ void GrainsSolver::load_state(StateReader& r) {
   index_loads();
   seq_valid_ = false;
   device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
+  device_.hist_stale = device_.slips_stale = device_.slips_there = false;
 }
 
 // ---- contact history ----
@@ -1789,25 +1817,48 @@ int32_t GrainsSolver::previous_index(int32_t id) const {
   return hist_lookup_[id];
 }
 
+bool GrainsSolver::history_ids(size_t n, int32_t* top) const {
+  *top = -1;
+  for (int32_t id : hist_id_) {
+    if (id < 0) return false;
+    *top = std::max(*top, id);
+  }
+  return !hist_id_.empty() && static_cast<size_t>(*top) <= 8 * n + 1024;
+}
+
 void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows,
-                                int threads) {
+                                int threads, const SubstepContext* device) {
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
-  const size_t entries = neighbors_.indices.size();
+  const size_t entries = neighbors_.offsets.empty() ? 0 : neighbors_.offsets.back();
   // the rows are last substep's: each entry's slip is where it was saved
   const bool kept = pairs && same_rows && hist_slip_.size() == 3 * entries;
-  if (kept) pair_slip_.swap(hist_slip_);
-  else if (pairs) pair_slip_.assign(3 * entries, 0.0f);
+  // the slips the device saved: the carried ones made there too, where its search's rows are
+  bool made_there = false;
+  if (pairs && device_.hist_stale) {
+    int32_t top = -1;
+    const bool ids = !kept && history_ids(n, &top);
+    made_there = device && open_device().load_pair_history(
+                               device_sizes(*device), kept, d.id, ids ? hist_id_.data() : nullptr,
+                               hist_id_.size(), ids ? size_t(top) + 1 : 0);
+    if (made_there) {
+      hist_lookups_device_ += ids;
+      pair_slip_.resize(3 * entries);
+      device_.slips_stale = device_.slips_there = true;
+    } else {
+      sync_history();
+    }
+  }
+  if (kept && !made_there)
+    pair_slip_.swap(hist_slip_);
+  else if (pairs && !made_there)
+    pair_slip_.assign(3 * entries, 0.0f);
   if (planes) plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
-  const bool lookup_pairs = pairs && !kept && !hist_slip_.empty();
+  const bool lookup_pairs = pairs && !kept && !made_there && !hist_slip_.empty();
   if (hist_id_.empty() || (!lookup_pairs && !planes)) return;
   // last substep's grains by id (ids far sparser than the grains: no history)
   int32_t top = -1;
-  for (int32_t id : hist_id_) {
-    if (id < 0) return;
-    top = std::max(top, id);
-  }
-  if (static_cast<size_t>(top) > 8 * n + 1024) return;
+  if (!history_ids(n, &top)) return;
   hist_lookup_.assign(size_t(top) + 1, -1);
   for (size_t i = 0; i < hist_id_.size(); ++i) hist_lookup_[hist_id_[i]] = static_cast<int32_t>(i);
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -1815,14 +1866,10 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
     const int32_t h = previous_index(grain_id(d, i));
     if (h < 0) continue;
     if (lookup_pairs)
-      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-        const int32_t other = grain_id(d, neighbors_.indices[k]);
-        for (uint32_t m = hist_rows_.offsets[h]; m < hist_rows_.offsets[h + 1]; ++m)
-          if (hist_id_[hist_rows_.indices[m]] == other) {
-            std::copy_n(&hist_slip_[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
-            break;
-          }
-      }
+      gr_load_pair_slips(neighbors_.offsets.data(), neighbors_.indices.data(), d.id,
+                         static_cast<int>(i), h, hist_rows_.offsets.data(),
+                         hist_rows_.indices.data(), hist_id_.data(), hist_slip_.data(),
+                         pair_slip_.data());
     if (planes)
       for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
         for (uint32_t m = hist_plane_offsets_[h]; m < hist_plane_offsets_[h + 1]; ++m)
@@ -1835,7 +1882,7 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
 
 void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
                                 const gr_params& prm, const float* p, bool pairs, bool planes,
-                                int threads) {
+                                int threads, const SubstepContext* device) {
   if (planes) sync_planes();
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
@@ -1853,6 +1900,14 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   // rows from hist_rows_
   if (pairs) hist_slip_.resize(3 * neighbors_.indices.size());
   else hist_slip_.clear();
+  // on the device where its search's rows are: they stay there (hist_slip_ is then the
+  // device's until sync_history)
+  const bool pairs_there =
+      pairs && device &&
+      open_device().save_pair_history(g, prm, device_sizes(*device), p, pair_normal_.data());
+  device_.hist_stale = pairs_there;
+  hist_saved_device_ += pairs_there;
+  if (pairs && !pairs_there) sync_slips();  // the host reads the carried slips
   if (planes) {
     hist_plane_offsets_.assign(n + 1, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -1871,23 +1926,10 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     const int ii = static_cast<int>(i);
-    const gr_float3 pi = gr_load3(p, ii);
-    const gr_float3 di = gr_sub(pi, gr_load3(P, ii));
-    if (pairs)
-      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k) {
-        const int j = static_cast<int>(neighbors_.indices[k]);
-        gr_float3 h = gr_make3(0.0f, 0.0f, 0.0f);
-        if (j != ii && gr_as_float(pair_normal_[k]) > 0.0f) {
-          const gr_float3 pj = gr_load3(p, j);
-          const gr_float3 dx = gr_add(gr_sub(di, gr_sub(pj, gr_load3(P, j))),
-                                      gr_load3(pair_slip_.data(), static_cast<int>(k)));
-          const gr_float3 xij = gr_sub(pi, pj);
-          const gr_float3 nn = gr_pair_normal(xij, gr_length(xij), ii, j);
-          h = capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_pair_history_cap(&g, &prm, ii, j, gr_as_float(pair_normal_[k])));
-        }
-        gr_store3(hist_slip_.data(), static_cast<int>(k), h);
-      }
+    if (pairs && !pairs_there)
+      save_pair_slips(g, prm, p, pair_normal_.data(), i, hist_slip_.data());
     if (!planes) continue;
+    const gr_float3 di = gr_sub(gr_load3(p, ii), gr_load3(P, ii));
     uint32_t m = hist_plane_offsets_[i];
     for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
       if (!(collider_normal_[e] > 0.0f)) continue;

@@ -87,6 +87,10 @@ struct GrainsSettings {
   // substep, even where the device compares them with the contact list's (the tests compare the
   // two)
   bool fetch_plane_rows = false;
+  // use_opencl with jacobi: the contacts' slips are saved and carried on the host, even where the
+  // device could where its search's rows are (GrainsSolver::save_history; the tests compare the
+  // two)
+  bool host_history = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -192,6 +196,10 @@ class GrainsSolver {
   size_t rows_left_on_device() const { return rows_left_; }
   // use_opencl: the last substep's rows are those its device's search found (rows_on_device_)
   bool rows_from_device() const { return rows_on_device_; }
+  // use_opencl with jacobi: the substeps so far whose contact history the device saved, and
+  // those whose carried slips it looked up by id there (rather than finding them in place)
+  size_t histories_saved_on_device() const { return hist_saved_device_; }
+  size_t histories_looked_up_on_device() const { return hist_lookups_device_; }
   const std::vector<gr_seq_contact>& contact_list() const {
     sync_contacts();
     return seq_;
@@ -323,16 +331,24 @@ class GrainsSolver {
   // whether one of the colliders is a mesh, whose planes the host finds (planes.cpp)
   static bool any_mesh(const ColliderState* colliders, size_t count);
 
+  struct SubstepContext;  // the substep's stages' (solver.cpp)
+
   // contact history (friction anchors): each contact's slip its friction has not yet removed,
   // carried to the next substep by the grains' ids (GrainsData::id) so that a contact keeps
   // pulling back to where it stuck until it slides
-  void load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows, int threads);
+  // use_opencl (`device`: the substep's context): the pairs' slips are saved and loaded on the
+  // device where its search's rows are (opencl/history.cpp), the same floats
+  void load_history(const GrainsData& d, bool pairs, bool planes, bool same_rows, int threads,
+                    const SubstepContext* device);
   void save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
-                    const gr_params& prm, const float* p, bool pairs, bool planes, int threads);
+                    const gr_params& prm, const float* p, bool pairs, bool planes, int threads,
+                    const SubstepContext* device);
   int32_t previous_index(int32_t id) const;
+  // whether the last substep's ids (hist_id_) can be looked up, none below 0 and none far above
+  // n; *top: the largest
+  bool history_ids(size_t n, int32_t* top) const;
 
   // the substep's stages (solver.cpp)
-  struct SubstepContext;
   void build_shapes(const GrainsData& d);
   // device: the substep's context when its passes run on the OpenCL device (use_opencl)
   void pre_stabilize(const gr_grains& g, const gr_params& prm, bool pairs, int iterations,
@@ -394,6 +410,10 @@ class GrainsSolver {
     // the last end stayed there (end_held()); end_P_ and end_v_ are the device's until brought
     // back (end_positions(), end_velocities())
     bool end_there = false, end_P_stale = false, end_v_stale = false;
+    // the Jacobi path's contact history (save_history, load_history): hist_slip_ is the slips
+    // the device saved; pair_slip_ is the carried slips it made; slips_there: the device holds
+    // pair_slip_ (it made them, or a call of this substep sent them)
+    bool hist_stale = false, slips_stale = false, slips_there = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -488,6 +508,9 @@ class GrainsSolver {
   // (DeviceSlot::planes_stale), the planes' rows and colliders (DeviceSlot::plane_rows_stale),
   // and all of these with the contact list
   void sync_rows() const;
+  // hist_slip_ and pair_slip_ from the device (DeviceSlot::hist_stale, slips_stale)
+  void sync_history() const;
+  void sync_slips() const;
   void sync_rows_p() const;
   void sync_planes() const;
   void sync_end(bool positions, bool velocities) const;  // end_P_, end_v_ (DeviceSlot)
@@ -593,6 +616,7 @@ class GrainsSolver {
   // the history saved at the end of the last substep, by grain in that substep's order: the id
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once
   // they are rebuilt), and per grain a row of (collider, slip)
+  size_t hist_saved_device_ = 0, hist_lookups_device_ = 0;  // histories_saved_on_device() ...
   std::vector<int32_t> hist_id_;
   std::vector<int32_t> hist_lookup_;  // id -> index into hist_id_ (-1: none), ids >= 0
   NeighborList hist_rows_;

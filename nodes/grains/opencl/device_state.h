@@ -68,6 +68,11 @@ inline void arg(cl_kernel k, cl_uint index, const T& value) {
 inline void arg(cl_kernel k, cl_uint index, const Buffer& b) {
   arg(k, index, b.mem);
 }
+// a buffer argument, or null for a missing array (OpenCL 1.2: a null arg_value is a null pointer)
+inline void set_buffer(cl_kernel k, cl_uint index, const Buffer* b) {
+  cl_mem m = b ? b->mem : nullptr;
+  check(clSetKernelArg(k, index, sizeof(cl_mem), b ? &m : nullptr), "clSetKernelArg");
+}
 
 // the per-grain arrays of gr_grains, in the kernels' argument order (GR_GRAINS_ARGS)
 enum Array {
@@ -103,6 +108,8 @@ struct HostArray {
   const void* host;
   size_t bytes;
 };
+// g's arrays in Array order (null where g has none)
+void grain_arrays(const gr_grains& g, const IterationSizes& size, HostArray* out);
 
 struct Iterations::Impl {
   std::string name;
@@ -151,6 +158,18 @@ struct Iterations::Impl {
   // the Jacobi path's: a pass, and the largest move's parts
   cl_kernel stabilize_grains = nullptr, largest_part = nullptr;
   Buffer moved, moved_part;
+  // the Jacobi path's contact history (history.cpp, kernels/history.h): the kernels, the slips
+  // the last save wrote (hist_entries of them, of hist_grains grains) with the rows they belong
+  // to, the last substep's ids and each id's index there
+  cl_kernel save_pair_slips = nullptr, history_table = nullptr, load_pair_slips = nullptr;
+  Buffer hist_slip, hist_offsets, hist_indices, hist_id, hist_table;
+  size_t hist_entries = 0, hist_grains = 0;
+  bool hist_saved = false;  // hist_slip and its rows hold the last save's
+  // what the save and the load send, staged (held: a write reads them late, and the host
+  // rewrites its arrays before the next call): the positions, the pair sums, the saved ids
+  std::vector<float> hist_p_host;
+  std::vector<gr_uint> hist_sums_host;
+  std::vector<int> hist_id_host;
   // the most bytes one buffer may hold: the device's CL_DEVICE_MAX_MEM_ALLOC_SIZE, or less
   // when GRAINS_OPENCL_MAX_BUFFER_MIB says so
   size_t largest = 0;
@@ -241,7 +260,8 @@ struct Iterations::Impl {
                       &moved_part, &velocity, &repeat, &external, &balance, &cold, &cut,
                       &seq_old, &seq_offsets, &seq_table_slots, &seq_block_start, &seq_links_bits,
                       &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
-                      &wave_ends, &block_waves})
+                      &wave_ends, &block_waves, &hist_slip, &hist_offsets, &hist_indices,
+                      &hist_id, &hist_table})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -265,7 +285,8 @@ struct Iterations::Impl {
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
                         finish, scatter3, final_collision, carry, predict, plane_same,
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
-                        sleep_carry, motion})
+                        sleep_carry, motion, save_pair_slips, history_table,
+                        load_pair_slips})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

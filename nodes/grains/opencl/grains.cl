@@ -8,6 +8,7 @@
 #include "contact.h"
 #include "distance.h"
 #include "final_collision.h"
+#include "history.h"
 #include "iterate.h"
 #include "mass_shock.h"
 #include "params.h"
@@ -394,6 +395,44 @@ __kernel void gr_k_stabilize_grains(gr_params prm, GR_GRAINS_ARGS, __global cons
     moved[i] = gr_length(gr_sub(y, gr_load3(x, i))) / radius[i];
     gr_store3(next, i, y);
   }
+}
+
+/* the Jacobi path's contact history (kernels/history.h, opencl/history.cpp): grain i's slips
+ * saved at the substep's end into out */
+__kernel void gr_k_save_pair_slips(gr_params prm, GR_GRAINS_ARGS, __global const float* p,
+                                   __global const gr_uint* pair_normal, __global float* out,
+                                   int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_save_pair_slips(&g, &prm, p, pair_normal, i, out);
+  }
+}
+
+/* grain i of the last substep's n at its id in table (filled with -1 before; ids >= 0 and below
+ * the table's size; hist_id null: its index) */
+__kernel void gr_k_history_table(__global const int* hist_id, int n, __global int* table) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  table[hist_id ? hist_id[i] : i] = i;
+}
+
+/* grain i's carried slips, looked up by id in the last substep's rows (gr_load_pair_slips): its
+ * index there from table (table_size ids) */
+__kernel void gr_k_load_pair_slips(__global const gr_uint* offsets, __global const gr_uint* indices,
+                                   __global const int* id, __global const int* table,
+                                   int table_size, __global const gr_uint* hist_offsets,
+                                   __global const gr_uint* hist_indices,
+                                   __global const int* hist_id, __global const float* hist_slip,
+                                   __global float* slip, int n) {
+  const int i = (int)get_global_id(0);
+  int me, h;
+  if (i >= n) return;
+  me = id ? id[i] : i;
+  h = me >= 0 && me < table_size ? table[me] : -1;
+  gr_load_pair_slips(offsets, indices, id, i, h, hist_offsets, hist_indices, hist_id, hist_slip,
+                     slip);
 }
 
 /* work-item w of `items`: the largest of v[w], v[w + items], ... into part[w] (the host takes

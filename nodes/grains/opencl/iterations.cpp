@@ -12,9 +12,7 @@
 #include "nodes/grains/opencl/device_state.h"
 
 namespace grains::opencl {
-namespace {
 
-// g's arrays in Array order (null where g has none)
 void grain_arrays(const gr_grains& g, const IterationSizes& size, HostArray* out) {
   const size_t n = size.n, f = sizeof(float), u = sizeof(gr_uint);
   const HostArray a[] = {
@@ -43,18 +41,6 @@ void grain_arrays(const gr_grains& g, const IterationSizes& size, HostArray* out
   static_assert(sizeof(a) / sizeof(a[0]) == kArrays, "one input per array");
   std::copy(a, a + kArrays, out);
 }
-
-}  // namespace
-
-namespace {
-
-// a buffer argument, or null for a missing array (OpenCL 1.2: a null arg_value is a null pointer)
-void set_buffer(cl_kernel k, cl_uint index, const Buffer* b) {
-  cl_mem m = b ? b->mem : nullptr;
-  check(clSetKernelArg(k, index, sizeof(cl_mem), b ? &m : nullptr), "clSetKernelArg");
-}
-
-}  // namespace
 
 Iterations::Iterations() : impl_(std::make_unique<Impl>()) {
   DeviceChoice choice;
@@ -262,6 +248,7 @@ void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& s
     if (!((!rows_only || k == kNbrOffsets || k == kNbrIndices) &&
           !(size.planes_there && (k == kPlaneOffsets || k == kPlane))))
       continue;
+    if (k == kPairSlip && size.slips_there) continue;  // the device made them, or they went
     if (rows_there && (k == kNbrOffsets || k == kNbrIndices)) {
       copy_once(arrays[k], k == kNbrOffsets ? nb_offsets : nb_indices, a[k].host, a[k].bytes);
       continue;
@@ -370,6 +357,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
 
   m.download(*from, p, 3 * n * f);
   m.download(m.pair_sum, acc.pair, size.pair_entries * u);
+  if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);  // (save_pair_history)
   m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
   m.download(m.friction_dx, acc.friction_dx, 3 * n * f);

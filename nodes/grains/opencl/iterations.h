@@ -44,6 +44,9 @@ struct IterationSizes {
   // the device's last neighbour search found the rows (g's nbr_offsets and nbr_indices, as it
   // gave them): they do not go up, the device copies them where the solve reads them
   bool rows_there = false;
+  // the device holds g.pair_slip: it made them (load_pair_history) or a call of this substep
+  // sent them, and the host has not changed them since
+  bool slips_there = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
@@ -178,6 +181,25 @@ class Iterations {
                        NeighborList& out, bool indices_there = false, bool p_there = false);
   // the rows the last find_neighbours() left there into out (out.offsets sized as it gave them)
   void fetch_rows(NeighborList& out);
+
+  // The Jacobi path's contact history between grains kept on the device (kernels/history.h,
+  // opencl/history.cpp), where the rows its search found are (size.rows_there). save: each row
+  // entry's slip at the substep's end (gr_save_pair_slips) from p (3 n floats, sent), g's start
+  // positions, rows and carried slips and the pair sums `pair_normal` (each where the substep's
+  // calls left it, else sent), kept there with the rows. load: the next substep's carried slips
+  // (g.pair_slip) made there: `kept`, its rows are those saved and the slips are the saved
+  // ones; else looked up by id (gr_load_pair_slips) in the saved rows, `id` the grains' ids (n;
+  // null: their indices), `hist_id` the saved grains' (hist_n; null: no lookup, every slip 0),
+  // ids below `table_size`. Both false where the device cannot (no such rows there, no save);
+  // nothing is changed then.
+  bool save_pair_history(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                         const float* p, const gr_uint* pair_normal);
+  bool load_pair_history(const IterationSizes& size, bool kept, const int* id, const int* hist_id,
+                         size_t hist_n, size_t table_size);
+  // the last save's slips (3 floats an entry), and the slips the last load made (3 floats an
+  // entry of the substep's rows), into host memory
+  void fetch_pair_history(float* out);
+  void fetch_pair_slips(float* out, size_t entries);
   // What the host reads along those rows (kernels/row_stats.h), computed where they are in runs
   // of grains and combined in run order. row_overlaps: the overlap statistics of the positions
   // P (n x 3, m, uploaded) with the radii `radius` (n, the grains' radii, uploaded once a

@@ -10,15 +10,6 @@
 #include "nodes/grains/opencl/iterations.h"
 
 namespace grains::opencl {
-namespace {
-
-// a buffer argument, or null (OpenCL 1.2: a null arg_value is a null pointer)
-void set_buffer(cl_kernel k, cl_uint index, const Buffer* b) {
-  cl_mem mem = b ? b->mem : nullptr;
-  check(clSetKernelArg(k, index, sizeof(cl_mem), b ? &mem : nullptr), "clSetKernelArg");
-}
-
-}  // namespace
 
 bool Iterations::sleeps_there() const {
   Impl& m = *impl_;

@@ -258,4 +258,46 @@ inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int ma
   return sc;
 }
 
+// the grains of `sc` in the order `order` (new grain k: old grain order[k]), or with grains
+// killed (left out of `order`) and born (order[k] >= size: a grain near `born`, falling, with a
+// fresh id)
+inline void reorder(Scene& sc, const std::vector<size_t>& order, const Vec3& born) {
+  const std::vector<float> P = sc.P, v = sc.v, mass = sc.mass, pscale = sc.pscale;
+  const std::vector<int32_t> ids = sc.ids;
+  const size_t was = mass.size();
+  auto take3 = [&](std::vector<float>& to, const std::vector<float>& from, size_t k, size_t j,
+                   const Vec3& fresh) {
+    const Vec3 x = j < was ? Vec3{from[3 * j], from[3 * j + 1], from[3 * j + 2]} : fresh;
+    to[3 * k] = x.x, to[3 * k + 1] = x.y, to[3 * k + 2] = x.z;
+  };
+  const size_t n = order.size();
+  sc.P.assign(3 * n, 0.0f), sc.v.assign(3 * n, 0.0f), sc.force.assign(3 * n, 0.0f);
+  sc.mass.assign(n, 1.0f), sc.pscale.assign(n, 0.04f), sc.shockmass.assign(n, 0.0f);
+  sc.ids.assign(n, 0);
+  int32_t next = *std::max_element(ids.begin(), ids.end()) + 1;
+  for (size_t k = 0; k < n; ++k) {
+    const size_t j = order[k];
+    take3(sc.P, P, k, j, born + Vec3{0.09f * float(k % 8), 0.0f, 0.09f * float(k / 8 % 8)});
+    take3(sc.v, v, k, j, Vec3{0.01f * float(k % 7), -0.5f, 0.0f});  // not one word over and over
+    if (j < was) sc.mass[k] = mass[j], sc.pscale[k] = pscale[j];
+    sc.ids[k] = j < was ? ids[j] : next++;
+  }
+}
+
+// new orders for reorder(): n grains in blocks of 64, each reversed, in reverse; and every
+// 40th grain killed (from the 8th) and as many born (*born of them) at the end
+inline std::vector<size_t> blocks_reversed(size_t n) {
+  std::vector<size_t> order;
+  for (size_t b = 0; b < n; b += 64)
+    for (size_t i = 0; i < 64 && b + i < n; ++i) order.push_back(n - 1 - b - i);
+  return order;
+}
+inline std::vector<size_t> killed_and_born(size_t n, size_t* born) {
+  std::vector<size_t> order;
+  for (size_t i = 0; i < n; ++i)
+    if (i % 40 != 7) order.push_back(i);
+  for (*born = 0; order.size() < n; ++*born) order.push_back(n + *born);
+  return order;
+}
+
 }  // namespace grains::test

@@ -380,34 +380,6 @@ TEST_CASE("use_opencl: an end that is not finite is not held on the device", "[o
   CHECK_FALSE(std::isfinite(thrown.pos(100).x));
 }
 
-namespace {
-// the grains of `sc` in the order `order` (new grain k: old grain order[k]), or with grains
-// killed (left out of `order`) and born (order[k] >= size: a grain near `born`, falling, with a
-// fresh id)
-void reorder(test::Scene& sc, const std::vector<size_t>& order, const Vec3& born) {
-  const std::vector<float> P = sc.P, v = sc.v, mass = sc.mass, pscale = sc.pscale;
-  const std::vector<int32_t> ids = sc.ids;
-  const size_t was = mass.size();
-  auto take3 = [&](std::vector<float>& to, const std::vector<float>& from, size_t k, size_t j,
-                   const Vec3& fresh) {
-    const Vec3 x = j < was ? Vec3{from[3 * j], from[3 * j + 1], from[3 * j + 2]} : fresh;
-    to[3 * k] = x.x, to[3 * k + 1] = x.y, to[3 * k + 2] = x.z;
-  };
-  const size_t n = order.size();
-  sc.P.assign(3 * n, 0.0f), sc.v.assign(3 * n, 0.0f), sc.force.assign(3 * n, 0.0f);
-  sc.mass.assign(n, 1.0f), sc.pscale.assign(n, 0.04f), sc.shockmass.assign(n, 0.0f);
-  sc.ids.assign(n, 0);
-  int32_t next = *std::max_element(ids.begin(), ids.end()) + 1;
-  for (size_t k = 0; k < n; ++k) {
-    const size_t j = order[k];
-    take3(sc.P, P, k, j, born + Vec3{0.09f * float(k % 8), 0.0f, 0.09f * float(k / 8 % 8)});
-    take3(sc.v, v, k, j, Vec3{0.01f * float(k % 7), -0.5f, 0.0f});  // not one word over and over
-    if (j < was) sc.mass[k] = mass[j], sc.pscale[k] = pscale[j];
-    sc.ids[k] = j < was ? ids[j] : next++;
-  }
-}
-}  // namespace
-
 TEST_CASE("use_opencl: the substep's start made on the device from an end in another order",
           "[opencl][gauss_seidel]") {
   // The contact-list tests' 512 grains, with ids, falling onto the ground for 40 substeps,
@@ -428,15 +400,12 @@ TEST_CASE("use_opencl: the substep's start made on the device from an end in ano
     std::vector<size_t> order;
     size_t born = 0;
     if (k > 0 && k % 10 == 0) {
-      for (size_t b = 0; b < n; b += 64)  // blocks of 64 grains, each reversed, in reverse
-        for (size_t i = 0; i < 64 && b + i < n; ++i) order.push_back(n - 1 - b - i);
+      order = test::blocks_reversed(n);
     } else if (k == 25) {
-      for (size_t i = 0; i < n; ++i)
-        if (i % 40 != 7) order.push_back(i);
-      for (born = 0; order.size() < n; ++born) order.push_back(n + born);
+      order = test::killed_and_born(n, &born);
     }
     if (!order.empty())
-      for (test::Scene* sc : {&sent, &made}) reorder(*sc, order, {0.1f, 1.2f, 0.1f});
+      for (test::Scene* sc : {&sent, &made}) test::reorder(*sc, order, {0.1f, 1.2f, 0.1f});
     sent.substep();
     made.substep();
     CHECK(made.solver.carried_start() == (k > 0));

@@ -101,18 +101,19 @@ TEST_CASE("use_opencl: the Jacobi path's pre-stabilization sends no contact hist
   CHECK(sent_a - sent_b <= most);
 }
 
-TEST_CASE("use_opencl: the Jacobi path reads the rows its device found where they are",
+TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the device",
           "[opencl][jacobi]") {
   // contact_solver jacobi on the 512 falling grains (pre-stabilization and friction on), 120
   // substeps: each takes the rows the device's search found (that substep's, or the last one's,
-  // kept), and the pre-stabilization's passes and the iterations read them there. A substep
-  // sends at most, a grain: positions six times, 12 B each and one float (the start the
-  // iterations read, the pre-stabilized start, the positions pre-stabilization moves, the
-  // iterations' own, the plane finder's, the search's); the contacts' carried slips, 12 B an
-  // entry of the rows and of the planes; and 136 B a collider, 12 for the force and 1 KiB of
-  // flags. From the 48th substep on, the grains on the ground and their contacts' slips not
-  // zero (zeros go up as one word), sending the rows (4 B a grain and an entry) in any call
-  // would fail that bound.
+  // kept), and the pre-stabilization's passes and the iterations read them there; the contacts'
+  // slips are saved there at each substep's end and carried into the next there (looked up by
+  // the grains' ids in the last rows, or found in place). A substep sends at most, a grain:
+  // positions seven times, 12 B each and one float (the start the iterations read, the
+  // pre-stabilized start, the positions pre-stabilization moves, the iterations' own, the plane
+  // finder's, the search's, the history's save's); the ids of the grains now and in the last
+  // substep for a lookup, 8 B; the planes' carried slips, 12 B an entry; and 136 B a collider,
+  // 12 for the force and 1 KiB of flags. Sending the rows (4 B a grain and an entry) in any
+  // call, or the rows' slips (12 B an entry), would fail that bound.
   test::Scene sc = test::layered_block(true);
   sc.s.contact_solver = kContactJacobi;
   sc.s.pre_stabilization = true;
@@ -124,14 +125,15 @@ TEST_CASE("use_opencl: the Jacobi path reads the rows its device found where the
     const double sent = double(sc.solver.device_traffic().sent - before.sent);
     const double rows = double(sc.solver.candidates()->indices.size());
     const double planes = double(sc.solver.collider_planes().offsets->back());
-    const double most = 6 * (12 * n + 4) + 12 * (rows + planes) + 136 * colliders + 12 + 1024;
+    const double most = 7 * (12 * n + 4) + 8 * n + 12 * planes + 136 * colliders + 12 + 1024;
     INFO("substep " << k << ": sent " << sent / n << " B a grain, " << rows / n
                     << " row entries and " << planes / n << " plane entries a grain");
     CHECK(sc.solver.rows_from_device());
     CHECK(sent <= most);
-    if (k >= 48) CHECK(sent + 4 * (n + 1 + rows) > most);
+    CHECK(sent + 4 * (n + 1 + rows) > most);
     stabilized += sc.solver.stabilize_passes() > 0;
   }
-  // the premise: pre-stabilization read the rows too
+  // the premises: pre-stabilization read the rows too, and the device saved every history
   CHECK(stabilized >= 100);
+  CHECK(sc.solver.histories_saved_on_device() == 120);
 }

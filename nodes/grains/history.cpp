@@ -1,0 +1,10 @@
+#include "nodes/grains/history.h"
+
+namespace grains {
+
+void save_pair_slips(const gr_grains& g, const gr_params& prm, const float* p,
+                     const uint32_t* pair_normal, size_t i, float* out) {
+  gr_save_pair_slips(&g, &prm, p, pair_normal, static_cast<int>(i), out);
+}
+
+}  // namespace grains

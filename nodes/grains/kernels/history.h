@@ -1,0 +1,81 @@
+/* The Jacobi path's contact history between grains (GrainsSolver::save_history and
+ * load_history), grain by grain: the host runs these functions through
+ * nodes/grains/history.cpp, a device through opencl/grains.cl (gr_k_save_pair_slips,
+ * gr_k_load_pair_slips), and both write the same floats: every product and sum is written out
+ * without a multiply and an add fused (the device's FP_CONTRACT off here, the host's file
+ * compiled with -ffp-contract=off) and without OpenCL's dot(), whose order a device chooses.
+ *
+ * Each entry of a grain's neighbour row keeps a slip (3 floats): what the contact slid
+ * tangentially in the substep and did not give back, which the next substep's friction removes
+ * with its own (kernels/contact.h, gr_pair_history_cap). */
+#ifndef GRAINS_KERNELS_HISTORY_H
+#define GRAINS_KERNELS_HISTORY_H
+#include "contact.h"
+#include "row_stats.h"
+
+GR_INLINE float gr_history_dot(gr_float3 a, gr_float3 b) {
+  GR_ROW_EXACT
+  const float xx = a.x * b.x, yy = a.y * b.y, zz = a.z * b.z;
+  return xx + yy + zz;
+}
+
+/* Grain i's slips saved at the end of the substep into out (3 floats an entry of its row in
+ * g->nbr_offsets and g->nbr_indices): for an entry that pushed in the substep (pair_normal, the
+ * bits of its accumulated normal correction, above 0), the tangential part of the pair's
+ * relative move (p, where the iterations ended, less the start g->P, of each grain) plus the slip
+ * it carried in (g->pair_slip), at most gr_pair_history_cap long; 0 for the others. */
+GR_INLINE void gr_save_pair_slips(const gr_grains* g, const gr_params* prm,
+                                  const GR_GLOBAL float* p, const GR_GLOBAL gr_uint* pair_normal,
+                                  int i, GR_GLOBAL float* out) {
+  GR_ROW_EXACT
+  const gr_float3 pi = gr_load3(p, i);
+  const gr_float3 di = gr_sub(pi, gr_load3(g->P, i));
+  gr_uint k;
+  for (k = g->nbr_offsets[i]; k < g->nbr_offsets[i + 1]; ++k) {
+    const int j = (int)g->nbr_indices[k];
+    const float a = gr_as_float(pair_normal[k]);
+    gr_float3 h = gr_make3(0.0f, 0.0f, 0.0f);
+    if (j != i && a > 0.0f) {
+      const gr_float3 pj = gr_load3(p, j);
+      const gr_float3 dx =
+          gr_add(gr_sub(di, gr_sub(pj, gr_load3(g->P, j))), gr_load3(g->pair_slip, (int)k));
+      const gr_float3 xij = gr_sub(pi, pj);
+      const gr_float3 nn = gr_pair_normal(xij, gr_sqrt(gr_history_dot(xij, xij)), i, j);
+      h = gr_sub(dx, gr_scale(nn, gr_history_dot(dx, nn)));
+      const float cap = gr_pair_history_cap(g, prm, i, j, a);
+      const float l = gr_sqrt(gr_history_dot(h, h));
+      if (l > cap) h = gr_scale(h, cap / l);
+    }
+    gr_store3(out, (int)k, h);
+  }
+}
+
+/* Grain i's carried slips into slip (3 floats an entry of its row in offsets and indices): for
+ * each entry, the slip the last substep saved for the same pair of grains, found by id in that
+ * substep's row of the grain (h: its index there, below 0 for none; hist_offsets and
+ * hist_indices that substep's rows, hist_id its grains' ids, hist_slip what it saved); 0 where
+ * there is none. id and hist_id null: a grain's id is its index. */
+GR_INLINE void gr_load_pair_slips(const GR_GLOBAL gr_uint* offsets,
+                                  const GR_GLOBAL gr_uint* indices, const GR_GLOBAL int* id, int i,
+                                  int h, const GR_GLOBAL gr_uint* hist_offsets,
+                                  const GR_GLOBAL gr_uint* hist_indices,
+                                  const GR_GLOBAL int* hist_id, const GR_GLOBAL float* hist_slip,
+                                  GR_GLOBAL float* slip) {
+  gr_uint k, m;
+  for (k = offsets[i]; k < offsets[i + 1]; ++k) {
+    const int j = (int)indices[k];
+    const int other = id ? id[j] : j;
+    gr_float3 s = gr_make3(0.0f, 0.0f, 0.0f);
+    if (h >= 0)
+      for (m = hist_offsets[h]; m < hist_offsets[h + 1]; ++m) {
+        const int was = (int)hist_indices[m];
+        if ((hist_id ? hist_id[was] : was) == other) {
+          s = gr_load3(hist_slip, (int)m);
+          break;
+        }
+      }
+    gr_store3(slip, (int)k, s);
+  }
+}
+
+#endif /* GRAINS_KERNELS_HISTORY_H */

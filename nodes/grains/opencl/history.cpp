@@ -1,0 +1,134 @@
+// The Jacobi path's contact history between grains on the device (kernels/history.h, grains.cl's
+// gr_k_save_pair_slips, gr_k_history_table and gr_k_load_pair_slips): the slips saved at a
+// substep's end stay here with the rows they belong to, and the next substep's carried slips are
+// made here from them, so that neither crosses (12 bytes a row entry each way).
+#include <cstdint>
+
+#include "nodes/grains/opencl/device_state.h"
+#include "nodes/grains/opencl/iterations.h"
+
+namespace grains::opencl {
+
+bool Iterations::save_pair_history(const gr_grains& g, const gr_params& prm,
+                                   const IterationSizes& size, const float* p,
+                                   const gr_uint* pair_normal) {
+  Impl& m = *impl_;
+  const size_t n = size.n, entries = size.pair_entries, f = sizeof(float), u = sizeof(gr_uint);
+  m.hist_saved = false;
+  if (n == 0 || !g.nbr_offsets || !g.nbr_indices || !g.pair_slip || !size.rows_there ||
+      !m.rows_found || m.rows_grains != n)
+    return false;
+  // what the kernel reads: the start, radii and friction (held from the substep's calls), the
+  // rows (copied from the search's), the carried slips (made or sent), the pair sums (as the
+  // last call gave them back) and the positions, which go up
+  HostArray a[kArrays];
+  grain_arrays(g, size, a);
+  m.upload_once(m.arrays[kP], a[kP].host, a[kP].bytes, a[kP].bytes + f);
+  m.upload_once(m.arrays[kRadius], a[kRadius].host, a[kRadius].bytes);
+  m.upload_once(m.arrays[kFriction], a[kFriction].host, a[kFriction].bytes);
+  m.copy_once(m.arrays[kNbrOffsets], m.nb_offsets, a[kNbrOffsets].host, a[kNbrOffsets].bytes);
+  m.copy_once(m.arrays[kNbrIndices], m.nb_indices, a[kNbrIndices].host, a[kNbrIndices].bytes);
+  if (!size.slips_there) m.upload(m.arrays[kPairSlip], a[kPairSlip].host, a[kPairSlip].bytes);
+  if (!m.holds(m.pair_sum, pair_normal, entries * u)) {
+    m.hist_sums_host.assign(pair_normal, pair_normal + entries);
+    m.upload(m.pair_sum, m.hist_sums_host.data(), entries * u);
+  }
+  m.hist_p_host.assign(p, p + 3 * n);
+  m.upload(m.p, m.hist_p_host.data(), 3 * n * f);
+  m.hist_slip.reserve(m.ctx, 3 * entries * f, m.largest);
+  HostArray bound[kArrays] = {};
+  for (int k : {kP, kRadius, kFriction, kNbrOffsets, kNbrIndices, kPairSlip}) bound[k] = a[k];
+  cl_kernel k = m.kernel(m.save_pair_slips, "gr_k_save_pair_slips");
+  const int count = static_cast<int>(n);
+  m.set_grains(k, prm, g, bound);
+  set_buffer(k, kFirstOwn, &m.p);
+  set_buffer(k, kFirstOwn + 1, &m.pair_sum);
+  set_buffer(k, kFirstOwn + 2, &m.hist_slip);
+  check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
+  m.launch(k, n);
+  // the rows they belong to, which the next search replaces
+  m.hist_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  m.hist_indices.reserve(m.ctx, entries * u, m.largest);
+  check(clEnqueueCopyBuffer(m.queue, m.arrays[kNbrOffsets].mem, m.hist_offsets.mem, 0, 0,
+                            (n + 1) * u, 0, nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  if (entries > 0)
+    check(clEnqueueCopyBuffer(m.queue, m.arrays[kNbrIndices].mem, m.hist_indices.mem, 0, 0,
+                              entries * u, 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+  m.hist_entries = entries;
+  m.hist_grains = n;
+  m.hist_saved = true;
+  return true;
+}
+
+bool Iterations::load_pair_history(const IterationSizes& size, bool kept, const int* id,
+                                   const int* hist_id, size_t hist_n, size_t table_size) {
+  Impl& m = *impl_;
+  const size_t n = size.n, entries = size.pair_entries, f = sizeof(float);
+  if (!m.hist_saved || n == 0) return false;
+  Buffer& slip = m.arrays[kPairSlip];
+  if (kept) {
+    // the same rows: each entry's slip is where it was saved
+    if (entries != m.hist_entries || n != m.hist_grains) return false;
+    slip.reserve(m.ctx, 3 * entries * f, m.largest);
+    if (entries > 0)
+      check(clEnqueueCopyBuffer(m.queue, m.hist_slip.mem, slip.mem, 0, 0, 3 * entries * f, 0,
+                                nullptr, nullptr),
+            "clEnqueueCopyBuffer");
+    m.forget(slip);
+    return true;
+  }
+  // new rows, where the search left them
+  if (!size.rows_there || !m.rows_found || m.rows_grains != n) return false;
+  slip.reserve(m.ctx, 3 * entries * f, m.largest);
+  m.forget(slip);
+  if (entries == 0) return true;
+  if (!hist_id || hist_n == 0 || table_size == 0) {
+    const float zero = 0.0f;
+    check(clEnqueueFillBuffer(m.queue, slip.mem, &zero, f, 0, 3 * entries * f, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    return true;
+  }
+  const size_t i = sizeof(int);
+  m.upload_once(m.id, id, n * i);
+  m.hist_id_host.assign(hist_id, hist_id + hist_n);
+  m.upload(m.hist_id, m.hist_id_host.data(), hist_n * i);
+  m.hist_table.reserve(m.ctx, table_size * i, m.largest);
+  const int none = -1, olds = static_cast<int>(hist_n), table = static_cast<int>(table_size),
+            count = static_cast<int>(n);
+  check(clEnqueueFillBuffer(m.queue, m.hist_table.mem, &none, i, 0, table_size * i, 0, nullptr,
+                            nullptr),
+        "clEnqueueFillBuffer");
+  cl_kernel t = m.kernel(m.history_table, "gr_k_history_table");
+  set_buffer(t, 0, &m.hist_id);
+  check(clSetKernelArg(t, 1, sizeof(int), &olds), "clSetKernelArg");
+  set_buffer(t, 2, &m.hist_table);
+  m.launch(t, hist_n);
+  cl_kernel k = m.kernel(m.load_pair_slips, "gr_k_load_pair_slips");
+  set_buffer(k, 0, &m.nb_offsets);
+  set_buffer(k, 1, &m.nb_indices);
+  set_buffer(k, 2, id ? &m.id : nullptr);
+  set_buffer(k, 3, &m.hist_table);
+  check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
+  set_buffer(k, 5, &m.hist_offsets);
+  set_buffer(k, 6, &m.hist_indices);
+  set_buffer(k, 7, &m.hist_id);
+  set_buffer(k, 8, &m.hist_slip);
+  set_buffer(k, 9, &slip);
+  check(clSetKernelArg(k, 10, sizeof(int), &count), "clSetKernelArg");
+  m.launch(k, n);
+  return true;
+}
+
+void Iterations::fetch_pair_history(float* out) {
+  Impl& m = *impl_;
+  m.download(m.hist_slip, out, 3 * m.hist_entries * sizeof(float));
+}
+
+void Iterations::fetch_pair_slips(float* out, size_t entries) {
+  Impl& m = *impl_;
+  m.download(m.arrays[kPairSlip], out, 3 * entries * sizeof(float));
+}
+
+}  // namespace grains::opencl

@@ -452,7 +452,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
   device.reset();
   holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
-  hist_stale = slips_stale = slips_there = false;
+  hist_stale = slips_stale = slips_there = sums_there = sums_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -471,7 +471,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   holds_contacts = o.holds_contacts;
   stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
-  hist_stale = slips_stale = slips_there = false;
+  hist_stale = slips_stale = slips_there = sums_there = sums_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -521,6 +521,13 @@ void GrainsSolver::sync_slips() const {
   self.device_.slips_stale = false;
 }
 
+void GrainsSolver::sync_sums() const {
+  if (!device_.sums_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_pair_sums(self.pair_normal_.data(), pair_normal_.size());
+  self.device_.sums_stale = false;
+}
+
 void GrainsSolver::sync_planes() const {
   if (!device_.planes_stale && !device_.plane_rows_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
@@ -566,6 +573,7 @@ void GrainsSolver::sync_device() const {
   sync_rows();
   sync_history();
   sync_slips();
+  sync_sums();
   sync_rows_p();
   sync_planes();
   sync_contacts();
@@ -581,8 +589,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   finished_there_ = collided_there_ = carried_ = carried_from_ = end_stays_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
-  // the last substep's carried slips are done with (its saved ones stay)
-  device_.slips_stale = device_.slips_there = false;
+  // the last substep's carried slips and pair sums are done with (its saved slips stay)
+  device_.slips_stale = device_.slips_there = device_.sums_there = device_.sums_stale = false;
   slept_there_ = sleep_there_;
   sleep_there_ = sleep_changed_ = force_there_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
@@ -1175,6 +1183,8 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   } else {
     // carry each pair's accumulated overlap over to its slot in the rebuilt rows
     std::vector<uint32_t> old;
+    sync_sums();  // the device's, where they stayed
+    device_.sums_there = false;
     old.swap(pair_normal_);
     pair_normal_.assign(entries, 0u);
     std::vector<float> old_slip;
@@ -1281,9 +1291,14 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
   gr_grains gd = c.g;
   if (!whole) gd.targetP = nullptr;
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
-  open_device().run(gd, c.prm, device_sizes(c), x, c.acc, count, whole ? friction_pass : friction_after,
+  // the pair sums stay there unless the host's history reads them (a rebuild of the rows
+  // during the iterations, or a save the device cannot make, brings them: sync_sums)
+  opencl::IterationSizes size = device_sizes(c);
+  size.sums_stay = !c.s.host_history;
+  open_device().run(gd, c.prm, size, x, c.acc, count, whole ? friction_pass : friction_after,
                     whole ? c.s.accurate_friction : false);
   if (gd.pair_slip) device_.slips_there = true;  // sent with it, or there already
+  if (c.acc.pair && gd.nbr_offsets) device_.sums_there = true, device_.sums_stale = size.sums_stay;
 }
 
 // the predicted positions for a device's call that takes them where the device holds them (its
@@ -1308,6 +1323,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.planes_there = planes_on_device_;
   size.rows_there = rows_on_device_;
   size.slips_there = device_.slips_there;
+  size.sums_there = device_.sums_there;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;
@@ -1802,6 +1818,7 @@ void GrainsSolver::load_state(StateReader& r) {
   seq_valid_ = false;
   device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
   device_.hist_stale = device_.slips_stale = device_.slips_there = false;
+  device_.sums_there = device_.sums_stale = false;
 }
 
 // ---- contact history ----
@@ -1907,7 +1924,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
       open_device().save_pair_history(g, prm, device_sizes(*device), p, pair_normal_.data());
   device_.hist_stale = pairs_there;
   hist_saved_device_ += pairs_there;
-  if (pairs && !pairs_there) sync_slips();  // the host reads the carried slips
+  if (pairs && !pairs_there) sync_slips(), sync_sums();  // the host reads them
   if (planes) {
     hist_plane_offsets_.assign(n + 1, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)

@@ -414,6 +414,9 @@ class GrainsSolver {
     // the device saved; pair_slip_ is the carried slips it made; slips_there: the device holds
     // pair_slip_ (it made them, or a call of this substep sent them)
     bool hist_stale = false, slips_stale = false, slips_there = false;
+    // the Jacobi path's pair sums (pair_normal_): sums_there, the device holds them from the
+    // substep's last call; sums_stale, the host's are older (they stayed there)
+    bool sums_there = false, sums_stale = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -511,6 +514,7 @@ class GrainsSolver {
   // hist_slip_ and pair_slip_ from the device (DeviceSlot::hist_stale, slips_stale)
   void sync_history() const;
   void sync_slips() const;
+  void sync_sums() const;  // pair_normal_ from the device (DeviceSlot::sums_stale)
   void sync_rows_p() const;
   void sync_planes() const;
   void sync_end(bool positions, bool velocities) const;  // end_P_, end_v_ (DeviceSlot)

@@ -126,6 +126,11 @@ void Iterations::fetch_pair_history(float* out) {
   m.download(m.hist_slip, out, 3 * m.hist_entries * sizeof(float));
 }
 
+void Iterations::fetch_pair_sums(gr_uint* out, size_t entries) {
+  Impl& m = *impl_;
+  m.download(m.pair_sum, out, entries * sizeof(gr_uint));
+}
+
 void Iterations::fetch_pair_slips(float* out, size_t entries) {
   Impl& m = *impl_;
   m.download(m.arrays[kPairSlip], out, 3 * entries * sizeof(float));

@@ -309,7 +309,10 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   m.upload_grains(g, size, p, inputs);
   const bool pairs = acc.pair && g.nbr_offsets;
   if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f, m.largest);
-  m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
+  if (size.sums_there)
+    m.pair_sum.reserve(m.ctx, size.pair_entries * u, m.largest);
+  else
+    m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
   m.upload(m.collider_sum, acc.collider, size.plane_entries * f);
   m.upload(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
   m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
@@ -356,8 +359,9 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   if (friction_pass && !accurate_friction) pass(m.friction);
 
   m.download(*from, p, 3 * n * f);
-  m.download(m.pair_sum, acc.pair, size.pair_entries * u);
-  if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);  // (save_pair_history)
+  if (!size.sums_stay) m.download(m.pair_sum, acc.pair, size.pair_entries * u);
+  // (save_pair_history: the device's are the sums, whether or not they came back)
+  if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
   m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
   m.download(m.friction_dx, acc.friction_dx, 3 * n * f);

@@ -47,6 +47,9 @@ struct IterationSizes {
   // the device holds g.pair_slip: it made them (load_pair_history) or a call of this substep
   // sent them, and the host has not changed them since
   bool slips_there = false;
+  // the device holds the pair sums (the last call's): run() does not send acc.pair; sums_stay:
+  // run() does not bring them back either (fetch_pair_sums() does)
+  bool sums_there = false, sums_stay = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
@@ -200,6 +203,8 @@ class Iterations {
   // entry of the substep's rows), into host memory
   void fetch_pair_history(float* out);
   void fetch_pair_slips(float* out, size_t entries);
+  // the pair sums the last run() left there (`entries` of them) into host memory
+  void fetch_pair_sums(gr_uint* out, size_t entries);
   // What the host reads along those rows (kernels/row_stats.h), computed where they are in runs
   // of grains and combined in run order. row_overlaps: the overlap statistics of the positions
   // P (n x 3, m, uploaded) with the radii `radius` (n, the grains' radii, uploaded once a

@@ -137,3 +137,33 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
   CHECK(stabilized >= 100);
   CHECK(sc.solver.histories_saved_on_device() == 120);
 }
+
+TEST_CASE("use_opencl: the Jacobi path's pair sums stay on the device", "[opencl][jacobi]") {
+  // The 512 falling grains with contact_solver jacobi, 120 substeps, twice from the same start:
+  // the contacts' history made on the host (host_history), which reads each row entry's
+  // accumulated normal correction (its pair sum, 4 B), so that they come back after the
+  // iterations; and on the device, where they stay (they come back only for a rebuild of the
+  // rows during the iterations or a history the device cannot make: GrainsSolver::sync_sums).
+  // The two runs give the same positions every substep, and what the device's run receives is
+  // the host's run's less exactly the pair sums.
+  test::Scene there = test::layered_block(true);
+  there.s.contact_solver = kContactJacobi;
+  there.s.pre_stabilization = true;
+  test::Scene host = there;
+  host.s.host_history = true;
+  const double n = double(there.size());
+  for (int k = 0; k < 120; ++k) {
+    const opencl::Traffic a0 = there.solver.device_traffic(), b0 = host.solver.device_traffic();
+    there.substep();
+    host.substep();
+    REQUIRE(there.P == host.P);
+    REQUIRE(there.v == host.v);
+    const double less = double(host.solver.device_traffic().received - b0.received) -
+                        double(there.solver.device_traffic().received - a0.received);
+    const double rows = double(there.solver.candidates()->indices.size());
+    INFO("substep " << k << ": " << rows / n << " row entries a grain, " << less / n
+                    << " B a grain less received");
+    CHECK(rows > 0);
+    CHECK(less == 4 * rows);
+  }
+}

@@ -452,7 +452,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
   device.reset();
   holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
-  hist_stale = slips_stale = slips_there = sums_there = sums_stale = false;
+  hist_stale = slips_stale = slips_there = sums_there = sums_stale = friction_there = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -471,7 +471,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   holds_contacts = o.holds_contacts;
   stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
-  hist_stale = slips_stale = slips_there = sums_there = sums_stale = false;
+  hist_stale = slips_stale = slips_there = sums_there = sums_stale = friction_there = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -591,6 +591,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   device_.owner = this;
   // the last substep's carried slips and pair sums are done with (its saved slips stay)
   device_.slips_stale = device_.slips_there = device_.sums_there = device_.sums_stale = false;
+  device_.friction_there = false;
   slept_there_ = sleep_there_;
   sleep_there_ = sleep_changed_ = force_there_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
@@ -1299,6 +1300,7 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
                     whole ? c.s.accurate_friction : false);
   if (gd.pair_slip) device_.slips_there = true;  // sent with it, or there already
   if (c.acc.pair && gd.nbr_offsets) device_.sums_there = true, device_.sums_stale = size.sums_stay;
+  if (c.acc.friction_dx) device_.friction_there = true;
 }
 
 // the predicted positions for a device's call that takes them where the device holds them (its
@@ -1324,6 +1326,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.rows_there = rows_on_device_;
   size.slips_there = device_.slips_there;
   size.sums_there = device_.sums_there;
+  size.friction_there = device_.friction_there;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;
@@ -1818,7 +1821,7 @@ void GrainsSolver::load_state(StateReader& r) {
   seq_valid_ = false;
   device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
   device_.hist_stale = device_.slips_stale = device_.slips_there = false;
-  device_.sums_there = device_.sums_stale = false;
+  device_.sums_there = device_.sums_stale = device_.friction_there = false;
 }
 
 // ---- contact history ----

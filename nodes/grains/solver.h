@@ -417,6 +417,8 @@ class GrainsSolver {
     // the Jacobi path's pair sums (pair_normal_): sums_there, the device holds them from the
     // substep's last call; sums_stale, the host's are older (they stayed there)
     bool sums_there = false, sums_stale = false;
+    // the device holds the friction each grain received (friction_dx_, which stays there)
+    bool friction_there = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();

@@ -315,7 +315,10 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
     m.upload(m.pair_sum, acc.pair, size.pair_entries * u);
   m.upload(m.collider_sum, acc.collider, size.plane_entries * f);
   m.upload(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
-  m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
+  if (size.friction_there)
+    m.friction_dx.reserve(m.ctx, 3 * n * f, m.largest);
+  else
+    m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
 
   for (cl_kernel k : {m.iterate, m.friction}) m.set_grains(k, prm, g, inputs);
   const int count = static_cast<int>(n);
@@ -364,7 +367,6 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
   m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
-  m.download(m.friction_dx, acc.friction_dx, 3 * n * f);
 }
 
 void Iterations::Impl::upload_contacts(const SequentialContacts& s) {

@@ -50,6 +50,9 @@ struct IterationSizes {
   // the device holds the pair sums (the last call's): run() does not send acc.pair; sums_stay:
   // run() does not bring them back either (fetch_pair_sums() does)
   bool sums_there = false, sums_stay = false;
+  // the device holds the friction each grain received this substep (acc.friction_dx), from the
+  // substep's last call: run() does not send it
+  bool friction_there = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
@@ -161,7 +164,9 @@ class Iterations {
   // `iterations` Jacobi iterations of p (3 n + 1 floats, in and out) with g's arrays and prm,
   // then the friction pass: after every iteration when `accurate_friction`, else once after
   // them; none when !friction_pass. acc's sums (pair, collider, collider_dx, friction_dx: host
-  // arrays, each null when unused) are read as they start and written back as they end.
+  // arrays, each null when unused) are read as they start and written back as they end, but
+  // for those the device holds (size.sums_there, friction_there) and keeps (sums_stay; the
+  // friction each grain received, which no host stage reads, never comes back).
   void run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
            const gr_normal_sums& acc, int iterations, bool friction_pass, bool accurate_friction);
 

@@ -113,16 +113,23 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
   // finder's, the search's, the history's save's); the ids of the grains now and in the last
   // substep for a lookup, 8 B; the planes' carried slips, 12 B an entry; and 136 B a collider,
   // 12 for the force and 1 KiB of flags. Sending the rows (4 B a grain and an entry) in any
-  // call, or the rows' slips (12 B an entry), would fail that bound.
+  // call, or the rows' slips (12 B an entry), would fail that bound. A substep that kept its
+  // rows (no lookup of the slips by id; from the 48th on) receives at most, a grain: positions
+  // twice, 12 B each (after pre-stabilization and after the iterations); 4 B a plane entry (the
+  // collider sums); the largest moves of the Verlet test and of each pre-stabilization pass
+  // (1,024 floats each); and 1 KiB of flags. The friction each grain received (12 B) or the
+  // pair sums (4 B an entry) coming back would fail that one.
   test::Scene sc = test::layered_block(true);
   sc.s.contact_solver = kContactJacobi;
   sc.s.pre_stabilization = true;
   const double n = double(sc.size()), colliders = double(sc.colliders.size());
-  int stabilized = 0;
+  int stabilized = 0, kept = 0;
   for (int k = 0; k < 120; ++k) {
     const opencl::Traffic before = sc.solver.device_traffic();
+    const size_t lookups = sc.solver.histories_looked_up_on_device();
     sc.substep();
     const double sent = double(sc.solver.device_traffic().sent - before.sent);
+    const double received = double(sc.solver.device_traffic().received - before.received);
     const double rows = double(sc.solver.candidates()->indices.size());
     const double planes = double(sc.solver.collider_planes().offsets->back());
     const double most = 7 * (12 * n + 4) + 8 * n + 12 * planes + 136 * colliders + 12 + 1024;
@@ -132,7 +139,16 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
     CHECK(sent <= most);
     CHECK(sent + 4 * (n + 1 + rows) > most);
     stabilized += sc.solver.stabilize_passes() > 0;
+    // from the 48th substep on, the grains at rest, and only where the rows were kept
+    if (k < 48 || sc.solver.histories_looked_up_on_device() > lookups) continue;
+    ++kept;
+    const double most_back =
+        2 * 12 * n + 4 * planes + 4096 * (1 + sc.solver.stabilize_passes()) + 1024;
+    INFO("received " << received / n << " B a grain");
+    CHECK(received <= most_back);
+    CHECK(received + 12 * n > most_back);
   }
+  CHECK(kept >= 60);
   // the premises: pre-stabilization read the rows too, and the device saved every history
   CHECK(stabilized >= 100);
   CHECK(sc.solver.histories_saved_on_device() == 120);

@@ -480,12 +480,13 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
 
 bool GrainsSolver::sleep_rows_on_device(const float* P, bool moved, const uint8_t* fast,
                                         std::vector<uint32_t>* out) {
-  if (!candidates_on_ || !device_.rows_stale) return false;
-  out->resize(n_);
+  if (!candidates_on_) return false;
   const bool there = !moved && P == written_on_device_;
   // or, where the device ended the substep, the positions it wrote but for those the host moved
   const std::vector<gr_uint>* written =
       !there && !moved && finished_there_ && P == finish_P_ ? &end_changed_ : nullptr;
+  if (!read_rows(!there && !written)) return false;
+  out->resize(n_);
   if (!there) written_on_device_ = nullptr;  // the device's copy of them is replaced
   if (!device_.device->sleep_rows(there ? nullptr : P, radius_, fast, n_, out->data(), written))
     return false;
@@ -500,17 +501,25 @@ opencl::Traffic GrainsSolver::device_traffic() const {
   return device_.device ? device_.device->traffic() : opencl::Traffic{};
 }
 
+bool GrainsSolver::read_rows(bool sends_positions) const {
+  const size_t sent = sends_positions ? 12 * n_ : 0;
+  if (device_.rows_stale && rows_read_sent_ + sent > rows_bytes_) sync_rows();
+  rows_read_sent_ += sent;
+  return device_.rows_stale;
+}
+
 void GrainsSolver::sync_rows() const {
   if (!device_.rows_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
   self.device_.device->fetch_rows(self.neighbors_);
   self.device_.rows_stale = false;
+  ++rows_brought_;
 }
 
 void GrainsSolver::sync_history() const {
   if (!device_.hist_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
-  self.device_.device->fetch_pair_history(self.hist_slip_.data());
+  self.device_.device->fetch_pair_history(self.hist_slip_.data(), &self.hist_rows_);
   self.device_.hist_stale = false;
 }
 
@@ -591,7 +600,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   device_.owner = this;
   // the last substep's carried slips and pair sums are done with (its saved slips stay)
   device_.slips_stale = device_.slips_there = device_.sums_there = device_.sums_stale = false;
-  device_.friction_there = false;
+  device_.friction_there = device_.p_there = false;
   slept_there_ = sleep_there_;
   sleep_there_ = sleep_changed_ = force_there_ = false;
   // a start held on the device: the end the last substep left there (GrainsData::start_held)
@@ -1109,15 +1118,19 @@ bool GrainsSolver::keep_rows(const SubstepContext& c) {
 // The rows (their offsets and indices) stay on the device (find_pairs) when nothing in the
 // substep reads them on the host: gauss_seidel builds its contact list there (not with impact
 // data or rigid shapes, whose lists the host builds; gauss_seidel.cpp brings the rows when the
-// device's build declines), and there are no constrained pairs to drop and no clumping, whose
-// Jacobi group takes the host's rows. Error control's overlap statistics and the Verlet skin are
-// then reduced there (contact_stats, remember_rows); the grains node's sleeping test, a saved state
-// and a copy of the solver bring them (sync_rows).
+// device's build declines), and clumping's Jacobi group takes the host's rows; jacobi's passes
+// and its contact history read them there (load_history and save_history bring them where the
+// host makes the history). Neither keeps them with constrained pairs to drop. Error control's
+// overlap statistics, the Verlet skin and the rows' longest are then reduced there
+// (contact_stats, remember_rows, find_pairs); a rebuild during the iterations, the grains node's
+// sleeping test, a saved state and a copy of the solver bring them (sync_rows).
 bool GrainsSolver::rows_stay(const SubstepContext& c) const {
   const GrainsSettings& s = c.s;
-  return s.use_opencl && s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on &&
-         !(c.constraints_on && !s.collide_mutually_constrained_particles) &&
-         !(s.clumping_weight > 0);
+  if (!s.use_opencl || s.fetch_rows ||
+      (c.constraints_on && !s.collide_mutually_constrained_particles))
+    return false;
+  if (s.contact_solver != kContactGaussSeidel) return !s.host_history;
+  return !c.impacts && !c.shapes_on && !(s.clumping_weight > 0);
 }
 
 void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
@@ -1125,19 +1138,25 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   const long ln = static_cast<long>(n);
   const int threads = c.threads;
   gr_grains& g = c.g;
-  if (!first && c.pair_friction_pass) std::swap(prev_neighbors_, neighbors_);
+  if (!first && c.pair_friction_pass) {
+    sync_rows();  // the sums and slips are carried over to the rebuilt rows here
+    std::swap(prev_neighbors_, neighbors_);
+  }
   // The friction pass's per-entry sums and the search's list store are about the same size
   // and never needed at once, so the search keeps its lists in pair_normal_'s memory, which
   // then takes the sums (the lists are copied out by then). Rebuilds during the iterations
   // carry the sums over and use the search's own store.
   // use_opencl: the rows stay on the device when the substep reads them only there (their
   // number of entries comes back)
-  const bool stay = first && rows_stay(c) && open_device().builds_contacts();
+  const bool stay =
+      first && rows_stay(c) && open_device().builds_contacts() && !(rows_read_sent_ > rows_bytes_);
   if (first && keep_rows(c)) {
     c.same_rows = true;
   } else {
-    // the contact history's lookup reads last substep's rows
-    if (first && c.pair_friction_pass && !hist_slip_.empty()) hist_rows_ = neighbors_;
+    // the contact history's lookup reads last substep's rows: those the host's save read, or
+    // the device's copy where they stayed there (sync_history)
+    if (first && c.pair_friction_pass && !hist_slip_.empty() && !device_.rows_stale)
+      hist_rows_ = neighbors_;
     // use_opencl: the rows found on the device (the same rows; the host's search where the
     // device cannot, opencl/iterations.h)
     const bool on_device =
@@ -1153,7 +1172,11 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     rows_true_radius_ = c.search_radius == radius_;
     device_.rows_stale = on_device && stay;
     rows_left_ += device_.rows_stale;
-    rows_valid_ = device_.rows_p_stale = false;
+    if (first) {
+      ++rows_searched_;
+      rows_read_sent_ = 0, rows_bytes_ = 4 * (n + 1 + size_t(neighbors_.offsets.back()));
+    }
+    rows_valid_ = device_.rows_p_stale = longest_known_ = false;
     // the positions the rows were built from: the device's where its search took them
     if (first && c.reusable)
       remember_rows(c.d, c.s, c.search_radius, on_device && predicted_there_ ? nullptr : host_p(c),
@@ -1171,8 +1194,17 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   g.nbr_indices = device_.rows_stale ? nullptr : neighbors_.indices.data();
   if (!c.pair_friction_pass) return;
   const size_t entries = neighbors_.offsets.back();
-  size_t longest = 0;
-  for (size_t i = 0; i < n; ++i) longest = std::max<size_t>(longest, neighbors_.count(i));
+  // the longest row, measured where the rows are, once for rows kept across substeps
+  if (!(first && c.same_rows && longest_known_)) {
+    rows_longest_ = 0;
+    if (!(device_.rows_stale && device_.device->row_longest(n, &rows_longest_))) {
+      sync_rows();
+      for (size_t i = 0; i < n; ++i)
+        rows_longest_ = std::max<size_t>(rows_longest_, neighbors_.count(i));
+    }
+    longest_known_ = true;
+  }
+  const size_t longest = rows_longest_;
   // whole blocks of the contact loop's lanes (gr_gather_contacts_lanes)
   row_length_ = (std::max<size_t>(longest, 1) + GR_LANES - 1) / GR_LANES * GR_LANES;
   // each thread's row a whole number of cache lines apart from the next one's, plus a line:
@@ -1376,6 +1408,7 @@ void GrainsSolver::iterate(SubstepContext& c) {
                             !s.update_neighbors_during_iterations &&
                             !s.update_collisions_during_iterations;
   if (device_whole) device_passes(c, p_.data(), iterations, false, true);
+  device_.p_there = device_whole;  // nothing here changes p_ before the history's save
   for (int it = 0; it < iterations && !device_whole; ++it) {
     if (it > 0 && c.pairs_on && s.update_neighbors_during_iterations) find_pairs(c, false);
     if (it > 0 && c.colliders_on && s.update_collisions_during_iterations) update_planes(c, false);
@@ -1689,10 +1722,11 @@ void GrainsSolver::contact_stats(const GrainsData& d, GrainsStats* stats) const 
   // the positions the device's end of the substep wrote there, but those write_back changed
   const std::vector<gr_uint>* written =
       finished_there_ && d.P == finish_P_ ? &end_changed_ : nullptr;
-  if (device_.rows_stale && device_.device->row_overlaps(d.P, rows_true_radius_ ? nullptr : radius_,
-                                                         n, &there, written)) {
+  if (read_rows(!written) && device_.device->row_overlaps(
+                                 d.P, rows_true_radius_ ? nullptr : radius_, n, &there, written)) {
     contacts = there.contacts, largest = there.largest, sum = there.sum;
     written_on_device_ = d.P;
+    ++overlaps_device_;
   } else {
     sync_rows();
     if (device_.end_there) {  // the end held there, here
@@ -1791,6 +1825,7 @@ void GrainsSolver::load_state(StateReader& r) {
   sleep_there_ = slept_there_ = false;
   r.section("grains rows");
   r.value(rows_valid_);
+  longest_known_ = false;  // not saved: measured again
   r.value(rows_skin_);
   r.value(rows_query_scale_);
   r.value(rows_max_);
@@ -1876,6 +1911,7 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
   if (planes) plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
   const bool lookup_pairs = pairs && !kept && !made_there && !hist_slip_.empty();
   if (hist_id_.empty() || (!lookup_pairs && !planes)) return;
+  if (lookup_pairs) sync_rows();  // the host looks each entry up in its row
   // last substep's grains by id (ids far sparser than the grains: no history)
   int32_t top = -1;
   if (!history_ids(n, &top)) return;
@@ -1918,16 +1954,21 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   // pairs: one slip per entry of the rows (0: the contact did not push in the substep), so that
   // rows kept for the next substep find theirs in place; the lookup after a rebuild reads the
   // rows from hist_rows_
-  if (pairs) hist_slip_.resize(3 * neighbors_.indices.size());
-  else hist_slip_.clear();
+  hist_slip_.resize(pairs ? 3 * size_t(neighbors_.offsets.back()) : 0);
   // on the device where its search's rows are: they stay there (hist_slip_ is then the
   // device's until sync_history)
   const bool pairs_there =
       pairs && device &&
-      open_device().save_pair_history(g, prm, device_sizes(*device), p, pair_normal_.data());
+      open_device().save_pair_history(g, prm, device_sizes(*device), p, pair_normal_.data(),
+                                      p == p_.data() && device_.p_there && !s.send_history_p);
   device_.hist_stale = pairs_there;
   hist_saved_device_ += pairs_there;
-  if (pairs && !pairs_there) sync_slips(), sync_sums();  // the host reads them
+  // the host reads them, and the rows, which the next substep's lookup reads (hist_rows_)
+  gr_grains gh = g;
+  if (pairs && !pairs_there) {
+    sync_slips(), sync_sums(), sync_rows();
+    gh.nbr_indices = neighbors_.indices.data();
+  }
   if (planes) {
     hist_plane_offsets_.assign(n + 1, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -1947,7 +1988,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   for (long i = 0; i < ln; ++i) {
     const int ii = static_cast<int>(i);
     if (pairs && !pairs_there)
-      save_pair_slips(g, prm, p, pair_normal_.data(), i, hist_slip_.data());
+      save_pair_slips(gh, prm, p, pair_normal_.data(), i, hist_slip_.data());
     if (!planes) continue;
     const gr_float3 di = gr_sub(gr_load3(p, ii), gr_load3(P, ii));
     uint32_t m = hist_plane_offsets_[i];

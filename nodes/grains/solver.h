@@ -91,6 +91,13 @@ struct GrainsSettings {
   // device could where its search's rows are (GrainsSolver::save_history; the tests compare the
   // two)
   bool host_history = false;
+  // use_opencl: the neighbour rows come back after each search of the device's, even where the
+  // substep reads them only there (GrainsSolver::rows_stay; the tests compare the two)
+  bool fetch_rows = false;
+  // use_opencl with jacobi: the positions the contact history's save reads go up, even where
+  // the device holds them from the iterations (GrainsSolver::save_history; the tests compare
+  // the two)
+  bool send_history_p = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -194,8 +201,20 @@ class GrainsSolver {
   size_t contact_lists_built_on_device() const { return seq_lists_device_; }
   // use_opencl: the neighbour searches whose rows' indices stayed on the device (rows_stay)
   size_t rows_left_on_device() const { return rows_left_; }
+  // the searches of rows at a substep's start (on either side, kept rows not counted), the
+  // times rows left on the device came back (sync_rows), and the overlap statistics measured
+  // along rows there (contact_stats)
+  size_t rows_searched() const { return rows_searched_; }
+  size_t rows_brought_back() const { return rows_brought_; }
+  size_t overlaps_on_device() const { return overlaps_device_; }
   // use_opencl: the last substep's rows are those its device's search found (rows_on_device_)
   bool rows_from_device() const { return rows_on_device_; }
+  // the last substep's number of row entries, and the most entries a row holds (with contacts'
+  // friction), measured where they are: neither brings the rows from the device
+  size_t candidate_entries() const {
+    return candidates_on_ && !neighbors_.offsets.empty() ? neighbors_.offsets.back() : 0;
+  }
+  size_t longest_row() const { return rows_longest_; }
   // use_opencl with jacobi: the substeps so far whose contact history the device saved, and
   // those whose carried slips it looked up by id there (rather than finding them in place)
   size_t histories_saved_on_device() const { return hist_saved_device_; }
@@ -419,6 +438,9 @@ class GrainsSolver {
     bool sums_there = false, sums_stale = false;
     // the device holds the friction each grain received (friction_dx_, which stays there)
     bool friction_there = false;
+    // p_ is what the device's whole-substep Jacobi call ended with, unchanged since: the
+    // contact history's save takes it there (save_history)
+    bool p_there = false;
     size_t loaded = 0;
     const GrainsSolver* owner = nullptr;
     DeviceSlot();
@@ -504,6 +526,17 @@ class GrainsSolver {
   // the device's rows were searched with the grains' own radii (not assume_uniform_radius's)
   bool rows_true_radius_ = false;
   size_t rows_left_ = 0;
+  // Rows left on the device cost what a read along them there sends: the positions, where the
+  // device holds none of those read (the host's end of the substep; 12 B a grain). read_rows()
+  // counts it for each read, made there or here, since the last search (rows_read_sent_), and
+  // brings the rows once it would pass what they take to bring (rows_bytes_: 4 B a grain and an
+  // entry); a search leaves them there unless the reads since the last one sent more than those
+  // rows took (find_pairs). So a substep's reads send at most what fetching the rows would, and
+  // rows kept for many substeps come back once, as they did before they stayed.
+  mutable size_t rows_read_sent_ = 0, rows_brought_ = 0, overlaps_device_ = 0;
+  size_t rows_searched_ = 0;
+  size_t rows_bytes_ = 0;
+  bool read_rows(bool sends_positions) const;
   // the device holds this substep's collider planes (find_planes): they do not go up again;
   // plane_rows_there_: their rows and colliders stayed there too (gauss_seidel's list built
   // there), where the device compared them with those of the list, kept there when it was
@@ -545,7 +578,10 @@ class GrainsSolver {
   // accumulated contact overlaps bounding the friction pass (gr_friction_pass)
   std::vector<uint32_t> pair_normal_;  // (neighbour entries) m, as float bits
   std::vector<float> pair_normal_it_;  // (threads x row_stride_) m: this iteration's overlaps
-  size_t row_length_ = 1;              // the longest neighbour row
+  size_t row_length_ = 1;              // the longest neighbour row, in whole blocks of lanes
+  // the longest neighbour row's entries (rows_longest_) measured since the rows were built
+  bool longest_known_ = false;
+  size_t rows_longest_ = 0;
   size_t row_stride_ = 1;              // floats between threads' rows in pair_normal_it_
   // pre-stabilization: start positions with the overlaps they began with removed (g.P after it)
   static constexpr float kStabilizeTolerance = 0.002f;  // of a grain's radius

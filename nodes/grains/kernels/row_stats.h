@@ -58,6 +58,17 @@ GR_INLINE void gr_row_reach(const GR_GLOBAL float* p, const GR_GLOBAL float* rad
   }
 }
 
+/* the most entries a row of the grains [first, end) holds, into *longest (the Jacobi contact
+ * loop's row scratch is that long) */
+GR_INLINE void gr_row_longest(const GR_GLOBAL gr_uint* offsets, int first, int end,
+                              gr_uint* longest) {
+  int i;
+  for (i = first; i < end; ++i) {
+    const gr_uint count = offsets[i + 1] - offsets[i];
+    if (count > *longest) *longest = count;
+  }
+}
+
 /* The grains node's sleeping test (nodes/grains/grains_node.cpp, update_sleep) reads grain k's
  * row at the written world positions P: how many neighbours lie within 1.05 and within 1.25
  * times the summed radii (a sleeper wakes when its contacts of 1.05 are no longer within 1.25),

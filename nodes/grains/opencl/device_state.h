@@ -186,7 +186,7 @@ struct Iterations::Impl {
   // read (the radii: arrays[kRadius] or nb_radius), each run's results; the sleeping test's
   // kernel, its fast flags and its words; the Verlet test's kernel (the rows' positions: nb_P)
   cl_kernel row_overlaps = nullptr, row_reach = nullptr, sleep_rows = nullptr;
-  cl_kernel rows_moved = nullptr;
+  cl_kernel rows_moved = nullptr, row_longest = nullptr;
   Buffer stats_P, stats_part, sleep_fast, sleep_out;
   // the substep's end (gr_k_finish), which writes the grains' positions into stats_P: for how
   // many grains it last did (0: stats_P holds positions sent since, or none); the grains the
@@ -286,7 +286,7 @@ struct Iterations::Impl {
                         finish, scatter3, final_collision, carry, predict, plane_same,
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table,
-                        load_pair_slips})
+                        load_pair_slips, row_longest})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -344,6 +344,11 @@ struct Iterations::Impl {
   // prediction made them (nb_P, plane_p or predicted), for p_taken_n grains
   Buffer* p_taken = nullptr;
   size_t p_taken_n = 0;
+  // the buffer (p or next) that holds the positions the last run() ended with, for run_out_n
+  // grains (0: none, or written since: upload_grains, begin_substep), which the contact
+  // history's save takes there (save_pair_history)
+  const Buffer* run_out = nullptr;
+  size_t run_out_n = 0;
 
   // copies `bytes` of host memory to b (grown as needed); a null host array leaves b unset
   void upload(Buffer& b, const void* host, size_t bytes, size_t device_bytes = 0) {
@@ -395,6 +400,10 @@ struct Iterations::Impl {
   // neighbour rows go (the others went with the call before, unchanged)
   void upload_grains(const gr_grains& g, const IterationSizes& size, const float* positions,
                      HostArray* a, bool rows_only = false);
+  // rows whose indices stayed where the search left them (size.rows_there, no host copy: a's
+  // indices null, its offsets not): the search's buffer stands in a for the host array that
+  // upload_once()'s records name, so that they are copied there and bound
+  void stand_in_rows(const IterationSizes& size, HostArray* a) const;
   // kernel k's first arguments: prm, the arrays `a` holds (null where it has none) and g's scalars
   void set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g, const HostArray* a);
   // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x

@@ -743,6 +743,7 @@ __kernel void gr_k_row_fill(gr_grid grid, __global const float* P, __global cons
  * [n w / runs, n (w + 1) / runs)) a work-item; the host combines the runs in order.
  * gr_k_row_overlaps: touching pairs, the largest overlap and the overlaps' sum at part[3 w ...];
  * gr_k_row_reach: the full rows' smallest reach at part[w] (+infinity: none);
+ * gr_k_row_longest: the most entries a row holds at part[w];
  * gr_k_rows_moved: the largest squared move from b, the rows' positions, to p at part[w] */
 #include "motion_need.h"
 #include "row_stats.h"
@@ -771,6 +772,15 @@ __kernel void gr_k_row_reach(__global const float* p, __global const float* radi
   gr_row_reach(p, radius, offsets, indices, (int)((long)n * w / runs),
                (int)((long)n * (w + 1) / runs), full, r_max, &reach);
   part[w] = reach;
+}
+
+__kernel void gr_k_row_longest(__global const gr_uint* offsets, int n, int runs,
+                               __global gr_uint* part) {
+  const int w = (int)get_global_id(0);
+  gr_uint longest = 0u;
+  if (w >= runs) return;
+  gr_row_longest(offsets, (int)((long)n * w / runs), (int)((long)n * (w + 1) / runs), &longest);
+  part[w] = longest;
 }
 
 __kernel void gr_k_rows_moved(__global const float* p, __global const float* b, int n, int runs,

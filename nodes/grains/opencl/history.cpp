@@ -11,18 +11,20 @@ namespace grains::opencl {
 
 bool Iterations::save_pair_history(const gr_grains& g, const gr_params& prm,
                                    const IterationSizes& size, const float* p,
-                                   const gr_uint* pair_normal) {
+                                   const gr_uint* pair_normal, bool p_there) {
   Impl& m = *impl_;
   const size_t n = size.n, entries = size.pair_entries, f = sizeof(float), u = sizeof(gr_uint);
   m.hist_saved = false;
-  if (n == 0 || !g.nbr_offsets || !g.nbr_indices || !g.pair_slip || !size.rows_there ||
-      !m.rows_found || m.rows_grains != n)
+  if (n == 0 || !g.nbr_offsets || !g.pair_slip || !size.rows_there || !m.rows_found ||
+      m.rows_grains != n)
     return false;
   // what the kernel reads: the start, radii and friction (held from the substep's calls), the
   // rows (copied from the search's), the carried slips (made or sent), the pair sums (as the
-  // last call gave them back) and the positions, which go up
+  // last call gave them back) and the positions, where the last run() left them (p_there) or
+  // sent
   HostArray a[kArrays];
   grain_arrays(g, size, a);
+  m.stand_in_rows(size, a);  // the rows' indices without a host copy
   m.upload_once(m.arrays[kP], a[kP].host, a[kP].bytes, a[kP].bytes + f);
   m.upload_once(m.arrays[kRadius], a[kRadius].host, a[kRadius].bytes);
   m.upload_once(m.arrays[kFriction], a[kFriction].host, a[kFriction].bytes);
@@ -33,15 +35,20 @@ bool Iterations::save_pair_history(const gr_grains& g, const gr_params& prm,
     m.hist_sums_host.assign(pair_normal, pair_normal + entries);
     m.upload(m.pair_sum, m.hist_sums_host.data(), entries * u);
   }
-  m.hist_p_host.assign(p, p + 3 * n);
-  m.upload(m.p, m.hist_p_host.data(), 3 * n * f);
+  const Buffer* positions = &m.p;
+  if (p_there && m.run_out_n == n) {
+    positions = m.run_out;
+  } else {
+    m.hist_p_host.assign(p, p + 3 * n);
+    m.upload(m.p, m.hist_p_host.data(), 3 * n * f);
+  }
   m.hist_slip.reserve(m.ctx, 3 * entries * f, m.largest);
   HostArray bound[kArrays] = {};
   for (int k : {kP, kRadius, kFriction, kNbrOffsets, kNbrIndices, kPairSlip}) bound[k] = a[k];
   cl_kernel k = m.kernel(m.save_pair_slips, "gr_k_save_pair_slips");
   const int count = static_cast<int>(n);
   m.set_grains(k, prm, g, bound);
-  set_buffer(k, kFirstOwn, &m.p);
+  set_buffer(k, kFirstOwn, positions);
   set_buffer(k, kFirstOwn + 1, &m.pair_sum);
   set_buffer(k, kFirstOwn + 2, &m.hist_slip);
   check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
@@ -121,9 +128,15 @@ bool Iterations::load_pair_history(const IterationSizes& size, bool kept, const 
   return true;
 }
 
-void Iterations::fetch_pair_history(float* out) {
+void Iterations::fetch_pair_history(float* out, NeighborList* rows) {
   Impl& m = *impl_;
   m.download(m.hist_slip, out, 3 * m.hist_entries * sizeof(float));
+  if (!rows) return;
+  rows->offsets.resize(m.hist_grains + 1);
+  rows->indices.resize(m.hist_entries);
+  m.download(m.hist_offsets, rows->offsets.data(), rows->offsets.size() * sizeof(gr_uint));
+  if (m.hist_entries > 0)
+    m.download(m.hist_indices, rows->indices.data(), m.hist_entries * sizeof(gr_uint));
 }
 
 void Iterations::fetch_pair_sums(gr_uint* out, size_t entries) {

@@ -104,6 +104,7 @@ void Iterations::begin_substep() {
   impl_->once.clear();
   impl_->p_taken = nullptr;
   impl_->carry_from_n = 0;
+  impl_->run_out_n = 0;
 }
 
 bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
@@ -240,7 +241,9 @@ bool Iterations::builds_contacts() const {
 
 void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& size,
                                      const float* positions, HostArray* a, bool rows_only) {
+  run_out_n = 0;  // p and next are rewritten
   grain_arrays(g, size, a);
+  stand_in_rows(size, a);
   // the rows the device's search left where they are (size.rows_there): copied there
   const bool rows_there = size.rows_there && rows_found && rows_grains == size.n;
   // positions: one float past the last grain, as the contact loop's block loads read
@@ -265,6 +268,12 @@ void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& s
   const size_t bytes = (3 * size.n + 1) * sizeof(float);
   upload(p, positions, bytes);
   next.reserve(ctx, bytes, largest);
+}
+
+void Iterations::Impl::stand_in_rows(const IterationSizes& size, HostArray* a) const {
+  if (size.rows_there && rows_found && rows_grains == size.n && a[kNbrOffsets].host &&
+      !a[kNbrIndices].host)
+    a[kNbrIndices].host = &nb_indices;
 }
 
 void Iterations::Impl::set_grains(cl_kernel k, const gr_params& prm, const gr_grains& g,
@@ -362,6 +371,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   if (friction_pass && !accurate_friction) pass(m.friction);
 
   m.download(*from, p, 3 * n * f);
+  m.run_out = from, m.run_out_n = n;
   if (!size.sums_stay) m.download(m.pair_sum, acc.pair, size.pair_entries * u);
   // (save_pair_history: the device's are the sums, whether or not they came back)
   if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
@@ -451,6 +461,7 @@ void Iterations::run_sequential(const gr_grains& g, const gr_params& prm, const 
     grain_arrays(g, size, inputs);
     m.upload(m.p, p, bytes);
     m.next.reserve(m.ctx, bytes, m.largest);
+    m.run_out_n = 0;
   } else {
     m.upload_grains(g, size, p, inputs);
     m.upload_contacts(s);

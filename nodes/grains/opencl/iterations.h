@@ -192,7 +192,8 @@ class Iterations {
 
   // The Jacobi path's contact history between grains kept on the device (kernels/history.h,
   // opencl/history.cpp), where the rows its search found are (size.rows_there). save: each row
-  // entry's slip at the substep's end (gr_save_pair_slips) from p (3 n floats, sent), g's start
+  // entry's slip at the substep's end (gr_save_pair_slips) from p (3 n floats: sent, or taken
+  // there where p_there says it is what the last run() ended with, unchanged since), g's start
   // positions, rows and carried slips and the pair sums `pair_normal` (each where the substep's
   // calls left it, else sent), kept there with the rows. load: the next substep's carried slips
   // (g.pair_slip) made there: `kept`, its rows are those saved and the slips are the saved
@@ -201,12 +202,13 @@ class Iterations {
   // ids below `table_size`. Both false where the device cannot (no such rows there, no save);
   // nothing is changed then.
   bool save_pair_history(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
-                         const float* p, const gr_uint* pair_normal);
+                         const float* p, const gr_uint* pair_normal, bool p_there = false);
   bool load_pair_history(const IterationSizes& size, bool kept, const int* id, const int* hist_id,
                          size_t hist_n, size_t table_size);
-  // the last save's slips (3 floats an entry), and the slips the last load made (3 floats an
-  // entry of the substep's rows), into host memory
-  void fetch_pair_history(float* out);
+  // the last save's slips (3 floats an entry) and, into *rows where given, the rows they belong
+  // to; and the slips the last load made (3 floats an entry of the substep's rows), into host
+  // memory
+  void fetch_pair_history(float* out, NeighborList* rows = nullptr);
   void fetch_pair_slips(float* out, size_t entries);
   // the pair sums the last run() left there (`entries` of them) into host memory
   void fetch_pair_sums(gr_uint* out, size_t entries);
@@ -227,6 +229,9 @@ class Iterations {
   bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,
                     const std::vector<gr_uint>* written_there = nullptr);
   bool row_reach(const float* radius, size_t n, gr_uint full, float r_max, float* reach);
+  // the longest of those rows' number of entries (gr_row_longest) into *longest; false when the
+  // device holds no rows of n grains
+  bool row_longest(size_t n, size_t* longest);
   // whether the device holds predicted positions of n grains (the last predict(), or a search
   // of rows or planes that took them), which calls given p_there take there
   bool holds_prediction(size_t n) const;

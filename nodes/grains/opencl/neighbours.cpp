@@ -84,6 +84,7 @@ void Iterations::Impl::open_neighbours() {
   row_overlaps = make("gr_k_row_overlaps");
   row_reach = make("gr_k_row_reach");
   rows_moved = make("gr_k_rows_moved");
+  row_longest = make("gr_k_row_longest");
   sleep_rows = make("gr_k_sleep_rows");
 }
 
@@ -276,6 +277,23 @@ bool Iterations::row_reach(const float* radius, size_t n, gr_uint full, float r_
   std::vector<float> part(runs);
   m.download(m.stats_part, part.data(), runs * sizeof(float));
   for (float r : part) *reach = std::min(*reach, r);  // the smallest, in any order the same
+  return true;
+}
+
+bool Iterations::row_longest(size_t n, size_t* longest) {
+  Impl& m = *impl_;
+  if (!m.rows_found || !m.row_longest || n != m.rows_grains) return false;
+  *longest = 0;
+  if (n == 0) return true;
+  const size_t runs = kBoundsItems;
+  m.stats_part.reserve(m.ctx, runs * sizeof(gr_uint), m.largest);
+  const int count = static_cast<int>(n), items = static_cast<int>(runs);
+  cl_kernel k = m.row_longest;
+  arg(k, 0, m.nb_offsets), arg(k, 1, count), arg(k, 2, items), arg(k, 3, m.stats_part);
+  m.launch(k, runs);
+  std::vector<gr_uint> part(runs);
+  m.download(m.stats_part, part.data(), runs * sizeof(gr_uint));
+  for (gr_uint r : part) *longest = std::max<size_t>(*longest, r);
   return true;
 }
 

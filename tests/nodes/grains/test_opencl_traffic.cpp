@@ -8,6 +8,35 @@
 
 using namespace grains;
 
+namespace {
+
+// One substep of each of two copies of a scene, which give the same positions and velocities
+// bit for bit: what the second sent and received more than the first
+struct More {
+  double sent, received;
+};
+More twin_substep(test::Scene& a, test::Scene& b) {
+  const opencl::Traffic a0 = a.solver.device_traffic(), b0 = b.solver.device_traffic();
+  a.substep();
+  b.substep();
+  REQUIRE(a.P == b.P);
+  REQUIRE(a.v == b.v);
+  const opencl::Traffic a1 = a.solver.device_traffic(), b1 = b.solver.device_traffic();
+  return {double(b1.sent - b0.sent) - double(a1.sent - a0.sent),
+          double(b1.received - b0.received) - double(a1.received - a0.received)};
+}
+
+// the 512 falling grains (test::layered_block) with contact_solver jacobi and
+// pre-stabilization
+test::Scene jacobi_block() {
+  test::Scene sc = test::layered_block(true);
+  sc.s.contact_solver = kContactJacobi;
+  sc.s.pre_stabilization = true;
+  return sc;
+}
+
+}  // namespace
+
 TEST_CASE("use_opencl: what crosses between the host and the device each substep",
           "[opencl][gauss_seidel]") {
   // The default gauss_seidel, its contact list built and kept on the device (the contact-list
@@ -108,31 +137,32 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
   // kept), and the pre-stabilization's passes and the iterations read them there; the contacts'
   // slips are saved there at each substep's end and carried into the next there (looked up by
   // the grains' ids in the last rows, or found in place). A substep sends at most, a grain:
-  // positions seven times, 12 B each and one float (the start the iterations read, the
+  // positions six times, 12 B each and one float (the start the iterations read, the
   // pre-stabilized start, the positions pre-stabilization moves, the iterations' own, the plane
-  // finder's, the search's, the history's save's); the ids of the grains now and in the last
-  // substep for a lookup, 8 B; the planes' carried slips, 12 B an entry; and 136 B a collider,
-  // 12 for the force and 1 KiB of flags. Sending the rows (4 B a grain and an entry) in any
-  // call, or the rows' slips (12 B an entry), would fail that bound. A substep that kept its
-  // rows (no lookup of the slips by id; from the 48th on) receives at most, a grain: positions
-  // twice, 12 B each (after pre-stabilization and after the iterations); 4 B a plane entry (the
-  // collider sums); the largest moves of the Verlet test and of each pre-stabilization pass
-  // (1,024 floats each); and 1 KiB of flags. The friction each grain received (12 B) or the
-  // pair sums (4 B an entry) coming back would fail that one.
-  test::Scene sc = test::layered_block(true);
-  sc.s.contact_solver = kContactJacobi;
-  sc.s.pre_stabilization = true;
+  // finder's, the search's; the history's save takes the iterations' end there); the ids of the
+  // grains now and in the last substep for a lookup, 8 B; the planes' carried slips, 12 B an entry;
+  // and 136 B a collider, 12 for the force and 1 KiB of flags. Sending the rows (4 B a grain and an
+  // entry) in any call, or the rows' slips (12 B an entry), would fail that bound. A substep that
+  // kept its rows (no lookup of the slips by id; from the 48th on) receives at most, a grain:
+  // positions twice, 12 B each (after pre-stabilization and after the iterations); 4 B a plane
+  // entry (the collider sums); the largest moves of the Verlet test and of each pre-stabilization
+  // pass (1,024 floats each); the overlap statistics where they were measured along the rows on the
+  // device (1,024 runs of 3 doubles), or the rows where they came back for them (4 B a grain
+  // and an entry, GrainsSolver::read_rows); and 1 KiB of flags. The friction each grain
+  // received (12 B) or the pair sums (4 B an entry) coming back would fail that one.
+  test::Scene sc = jacobi_block();
   const double n = double(sc.size()), colliders = double(sc.colliders.size());
   int stabilized = 0, kept = 0;
   for (int k = 0; k < 120; ++k) {
     const opencl::Traffic before = sc.solver.device_traffic();
     const size_t lookups = sc.solver.histories_looked_up_on_device();
+    const size_t overlaps = sc.solver.overlaps_on_device(), back = sc.solver.rows_brought_back();
     sc.substep();
     const double sent = double(sc.solver.device_traffic().sent - before.sent);
     const double received = double(sc.solver.device_traffic().received - before.received);
-    const double rows = double(sc.solver.candidates()->indices.size());
+    const double rows = double(sc.solver.candidate_entries());
     const double planes = double(sc.solver.collider_planes().offsets->back());
-    const double most = 7 * (12 * n + 4) + 8 * n + 12 * planes + 136 * colliders + 12 + 1024;
+    const double most = 6 * (12 * n + 4) + 8 * n + 12 * planes + 136 * colliders + 12 + 1024;
     INFO("substep " << k << ": sent " << sent / n << " B a grain, " << rows / n
                     << " row entries and " << planes / n << " plane entries a grain");
     CHECK(sc.solver.rows_from_device());
@@ -142,8 +172,11 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
     // from the 48th substep on, the grains at rest, and only where the rows were kept
     if (k < 48 || sc.solver.histories_looked_up_on_device() > lookups) continue;
     ++kept;
-    const double most_back =
-        2 * 12 * n + 4 * planes + 4096 * (1 + sc.solver.stabilize_passes()) + 1024;
+    const bool measured_there = sc.solver.overlaps_on_device() > overlaps;
+    const bool came_back = sc.solver.rows_brought_back() > back;
+    const double most_back = 2 * 12 * n + 4 * planes + 4096 * (1 + sc.solver.stabilize_passes()) +
+                             (measured_there ? 24576 : 0) + (came_back ? 4 * (n + 1 + rows) : 0) +
+                             1024;
     INFO("received " << received / n << " B a grain");
     CHECK(received <= most_back);
     CHECK(received + 12 * n > most_back);
@@ -154,6 +187,118 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
   CHECK(sc.solver.histories_saved_on_device() == 120);
 }
 
+TEST_CASE("use_opencl: the Jacobi path's rows stay on the device", "[opencl][jacobi]") {
+  // contact_solver jacobi on the 512 falling grains (pre-stabilization and friction on), 120
+  // substeps, twice from the same start: the rows the device's search found stay there (their
+  // number of entries comes back), read there by the passes, the contact history, the Verlet
+  // skin and test, error control's overlap statistics and the longest row's measure; and they
+  // come back after each search (fetch_rows), read on the host by those that read them there.
+  // The same positions and velocities every substep, bit for bit.
+  //
+  // What stays costs what the reads along the rows send (GrainsSolver::read_rows): the overlap
+  // statistics, measured each substep here, read the end positions the host wrote, 12 B a
+  // grain. A search's rows stay unless the reads since the last search sent, or would have
+  // sent, more than that search's rows take to bring (4 B a grain and an entry); rows that
+  // stayed come back at the read that would pass that. Until substep 40 each search's substep
+  // receives, where its rows stayed, the rows less, but for what the device's reductions bring
+  // instead, 1,024 runs each: the longest row (4 B a run), the rows' reach (4: the Verlet skin
+  // of rows cut at max_neighbors, 32) and the overlap statistics (24).
+  //
+  // Substeps 40 to 79 rebuild the rows during the iterations (carried over on the host, which
+  // brings the first search's), 60 to 89 write the solver's state and read it back after each
+  // substep (the host then looks up the contacts' slips in rows found on the device), and 100
+  // to 109 make the contacts' history on the host (host_history: the first, after searches at
+  // 98 and 99 whose rows stayed, looks the slips up in the rows the device saved them with,
+  // which come back with them; query scales changed at 98 and 99 alone make the three search).
+  // The longest row measured there is the rows' own.
+  test::Scene there = jacobi_block();
+  test::Scene fetched = there;
+  fetched.s.fetch_rows = true;
+  const double n = double(there.size());
+  const float scale = there.s.neighbor_query_scale;
+  int stayed = 0, fetched_first = 0, brought = 0;
+  double reads = 0, rows_bytes = 0;  // since the last search, and what its rows take
+  bool stale = false;                // the rows are on the device alone
+  for (int k = 0; k < 120; ++k) {
+    for (test::Scene* sc : {&there, &fetched}) {
+      sc->s.update_neighbors_during_iterations = k >= 40 && k < 80;
+      sc->s.host_history = k >= 100 && k < 110;
+      sc->s.neighbor_query_scale = (k == 98 ? 1.5f : k == 99 ? 1.25f : 1.0f) * scale;
+    }
+    const size_t left = there.solver.rows_left_on_device(), searches = there.solver.rows_searched(),
+                 back = there.solver.rows_brought_back();
+    const double less = twin_substep(there, fetched).received;
+    const double rows = double(there.solver.candidate_entries());
+    const bool search = there.solver.rows_searched() > searches;
+    const bool stay = there.solver.rows_left_on_device() > left;
+    const bool came_back = there.solver.rows_brought_back() > back;
+    INFO("substep " << k << ": " << rows / n << " row entries a grain, " << less / n
+                    << " B a grain less received" << (search ? ", searched" : "")
+                    << (stay ? ", the rows stayed" : "") << (came_back ? ", came back" : ""));
+    // the Verlet rows are not kept: after the first, each search's reads are one substep's
+    if (k > 40 && k < 80) CHECK(stay);
+    if (k == 99) CHECK(stay);
+    if (k < 40) {
+      if (search) {
+        CHECK(stay == !(k > 0 && reads > rows_bytes));
+        stayed += stay, fetched_first += !stay;
+        if (stay) CHECK(less == 4 * (n + 1 + rows) - 4 - 1024 * (4 + 4 + 24));
+        reads = 0, rows_bytes = 4 * (n + 1 + rows), stale = stay;
+      }
+      // this substep's read, made where the rows are: they come back where it passes them
+      const bool passes = stale && reads + 12 * n > rows_bytes;
+      CHECK(came_back == passes);
+      brought += passes;
+      stale = stale && !passes;
+      reads += 12 * n;
+    }
+    if (k >= 60 && k < 90)
+      for (test::Scene* sc : {&there, &fetched}) {
+        StateWriter w;
+        sc->solver.save_state(w);
+        StateReader r(w.bytes(), "round trip");
+        sc->solver.load_state(r);
+      }
+  }
+  // the premises: every case was met
+  INFO(stayed << " searches' rows stayed, " << fetched_first << " came back at once, " << brought
+              << " later");
+  CHECK(stayed >= 5);
+  CHECK(fetched_first >= 1);
+  CHECK(brought >= 1);
+  CHECK(fetched.solver.rows_left_on_device() == 0);
+  const size_t longest = there.solver.longest_row();
+  const NeighborList* rows = there.solver.candidates();  // brings them
+  REQUIRE(rows);
+  size_t most = 0;
+  for (size_t i = 0; i < there.size(); ++i) most = std::max<size_t>(most, rows->count(i));
+  CHECK(longest == most);
+  CHECK(longest == fetched.solver.longest_row());
+}
+
+TEST_CASE("use_opencl: the Jacobi path's history save takes the iterations' end on the device",
+          "[opencl][jacobi]") {
+  // The 512 falling grains with contact_solver jacobi (pre-stabilization and friction on), 96
+  // substeps, twice from the same start: the contacts' slips saved at each substep's end from
+  // the positions the iterations ended with where the device holds them (its whole-substep
+  // call), and from those positions sent again (send_history_p). The same positions and
+  // velocities every substep; the second sends exactly the positions more (12 B a grain) where
+  // the substep was one call, nothing more from substep 48 on, where Chebyshev's step between
+  // the iterations (made here) leaves the positions here and both send them.
+  test::Scene there = jacobi_block();
+  test::Scene sent = there;
+  sent.s.send_history_p = true;
+  const double n = double(there.size());
+  for (int k = 0; k < 96; ++k) {
+    for (test::Scene* sc : {&there, &sent}) sc->s.chebyshev_rho = k < 48 ? 0.0f : 0.9f;
+    const size_t saved = there.solver.histories_saved_on_device();
+    const double more = twin_substep(there, sent).sent;
+    INFO("substep " << k << ": " << more / n << " B a grain more sent");
+    CHECK(there.solver.histories_saved_on_device() == saved + 1);
+    CHECK(more == (k < 48 ? 12 * n : 0));
+  }
+}
+
 TEST_CASE("use_opencl: the Jacobi path's pair sums stay on the device", "[opencl][jacobi]") {
   // The 512 falling grains with contact_solver jacobi, 120 substeps, twice from the same start:
   // the contacts' history made on the host (host_history), which reads each row entry's
@@ -162,20 +307,13 @@ TEST_CASE("use_opencl: the Jacobi path's pair sums stay on the device", "[opencl
   // rows during the iterations or a history the device cannot make: GrainsSolver::sync_sums).
   // The two runs give the same positions every substep, and what the device's run receives is
   // the host's run's less exactly the pair sums.
-  test::Scene there = test::layered_block(true);
-  there.s.contact_solver = kContactJacobi;
-  there.s.pre_stabilization = true;
+  test::Scene there = jacobi_block();
+  there.s.fetch_rows = true;  // as the host's history reads them
   test::Scene host = there;
   host.s.host_history = true;
   const double n = double(there.size());
   for (int k = 0; k < 120; ++k) {
-    const opencl::Traffic a0 = there.solver.device_traffic(), b0 = host.solver.device_traffic();
-    there.substep();
-    host.substep();
-    REQUIRE(there.P == host.P);
-    REQUIRE(there.v == host.v);
-    const double less = double(host.solver.device_traffic().received - b0.received) -
-                        double(there.solver.device_traffic().received - a0.received);
+    const double less = twin_substep(there, host).received;
     const double rows = double(there.solver.candidates()->indices.size());
     INFO("substep " << k << ": " << rows / n << " row entries a grain, " << less / n
                     << " B a grain less received");

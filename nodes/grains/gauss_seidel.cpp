@@ -466,31 +466,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     if (!c.shapes_on) {
       // the substep's end there too (write_back takes what it wrote), unless the host reads the
       // passes' positions: for the impact data
-      opencl::SequentialSolve::Finish end;
-      finished_there_ = !c.impacts && !c.s.host_finish;
-      if (finished_there_) {
-        device_.end_P_stale = device_.end_v_stale = false;  // this end replaces the last one
-        end_P_.resize(3 * n);
-        end_v_.resize(3 * n);
-        end.P_out = end_P_.data();
-        end.v_out = end_v_.data();
-        end.keep_velocity = c.s.keep_velocity;  // the start's, as the device holds them
-        end.force = c.device_force;
-        end.force_uniform = c.force_uniform;
-        end.origin[0] = c.origin.x, end.origin[1] = c.origin.y, end.origin[2] = c.origin.z;
-        // the final collision test there too, on the colliders the device's planes took (every
-        // one analytic; a mesh's distance is the host's)
-        collided_there_ = c.s.final_collision_test && planes_on_device_ && end.v_out;
-        if (collided_there_) {
-          end.colliders = plane_colliders_.data();
-          end.collider_count = plane_colliders_.size();
-        }
-        // it stays there where the caller lets it (GrainsData::may_hold_end) and nothing here
-        // reads it: no final collision test here (a mesh), no constraints' strain
-        const bool test_here = c.s.final_collision_test && c.colliders_on && !collided_there_;
-        end.stay = end_stays_ = c.d.may_hold_end && end.v_out && !test_here && !c.constraints_on;
-        on_device.finish = &end;
-      }
+      opencl::SubstepEnd end;
+      if (!c.impacts && !c.s.host_finish) on_device.finish = finish_there(c, &end);
       cl.solve_sequential(gd, prm, size, p_for_device(c, p_on_device_), on, on_device,
                           c.iterations);
     } else {

@@ -596,6 +596,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   plane_rows_there_ = planes_same_ = false;
   written_on_device_ = nullptr;
   finished_there_ = collided_there_ = carried_ = carried_from_ = end_stays_ = false;
+  stable_there_ = stabilized_ = false;
   stabilize_passes_ = 0;
   device_.owner = this;
   // the last substep's carried slips and pair sums are done with (its saved slips stay)
@@ -623,6 +624,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // the kernels' inputs: per-grain arrays, pins, shapes, explicit constraints
   bind_inputs(c);
+  c.jacobi_there = jacobi_on_device(c);
 
   // use_opencl: the start positions and velocities from the last substep's end on the device
   carry_start(c);
@@ -654,7 +656,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
       ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
     pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads,
                   s.use_opencl ? &c : nullptr);
-    g.P = P_stable_.data();
+    stabilized_ = true;
+    g.P = P_stable_.data();  // on the device alone where it stayed there (stable_there_)
   }
 
   // 3. Jacobi iterations, friction, pins; or the contacts one at a time (gauss_seidel.cpp)
@@ -807,7 +810,7 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   }
 }
 
-// The last substep's end on the device (SequentialSolve::Finish) left its written positions and
+// The last substep's end on the device (SubstepEnd) left its written positions and
 // velocities there, and end_P_ and end_v_ hold the same floats here. Where the grains node hands
 // back the same (nothing between the substeps moved them: the same grains in the same order, no
 // sleeper put back, no other node's change), the device makes this substep's start from them
@@ -828,9 +831,7 @@ void GrainsSolver::carry_start(const SubstepContext& c) {
     if (!carried_) throw std::logic_error("grains: the device holds no end to start from");
     return;
   }
-  if (!s.use_opencl || s.resend_start || s.contact_solver != kContactGaussSeidel ||
-      !device_.device || end_P_.empty())
-    return;
+  if (!s.use_opencl || s.resend_start || !device_.device || end_P_.empty()) return;
   const size_t m = end_P_.size() / 3;  // the last end's grains
   // in the end's order (the same ids, or as many grains where either has no ids), or found in
   // it by id (carry_from_: a frame's first substep, whose grains the node sorts again by cell,
@@ -983,12 +984,19 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
 // here: the device predicts (GrainsSolver::predict), finds the planes (no mesh collider) and
 // solves; no global mass shock, constraint or shape reads the start positions. A kept start
 // velocity (error control's stabilizing substep) is the device's too: its end writes the one it
-// holds (SequentialSolve::Finish::keep_velocity). A stage that reads the start anyway (the
+// holds (SubstepEnd::keep_velocity). A stage that reads the start anyway (the
 // host's search of rows, host_p) brings it then.
 bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
                                const ColliderState* colliders, size_t collider_count) const {
-  return s.use_opencl && s.contact_solver == kContactGaussSeidel && !s.resend_start &&
-         s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
+  // jacobi's: where its chain runs there (jacobi_on_device, as far as the settings tell: the
+  // shapes need primitives, the impact data keep the end here)
+  const bool jacobi_chain =
+      s.contact_solver != kContactGaussSeidel &&
+      !(s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY) &&
+      !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
+      !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
+  return s.use_opencl && (s.contact_solver == kContactGaussSeidel || jacobi_chain) &&
+         !s.resend_start && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
          !any_mesh(colliders, collider_count);
 }
 
@@ -1018,7 +1026,7 @@ void GrainsSolver::predict(SubstepContext& c) {
   // one float past the last grain: the contact loop loads positions 4 floats at a time
   p_.resize(3 * n + 1);
   p_next_.resize(3 * n + 1);
-  if (c.s.use_opencl && c.s.contact_solver == kContactGaussSeidel) {
+  if (c.s.use_opencl && (c.s.contact_solver == kContactGaussSeidel || c.jacobi_there)) {
     c.device_force = device_force(c.g, &c.force_uniform);
     force_there_ = c.device_force != nullptr;
     force_uniform_ = c.force_uniform;
@@ -1034,6 +1042,9 @@ void GrainsSolver::predict(SubstepContext& c) {
 
 float* GrainsSolver::host_p(const SubstepContext& c) {
   if (p_made_) return p_.data();
+  if (stable_there_)
+    throw std::logic_error(
+        "grains: the prediction pre-stabilization moved on the device is not here");
   if (start_held_) fetch_start(c);  // its start, here
   const long ln = static_cast<long>(n_);
 #pragma omp parallel for schedule(static) num_threads(c.threads)
@@ -1320,7 +1331,7 @@ void GrainsSolver::project_pins(SubstepContext& c) {
 // the friction pass once when `friction_after`; pins only in the whole-substep call (`whole`:
 // the iterations' loop runs its own otherwise)
 void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool friction_after,
-                                 bool whole) {
+                                 bool whole, const opencl::JacobiSolve* w) {
   gr_grains gd = c.g;
   if (!whole) gd.targetP = nullptr;
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
@@ -1329,10 +1340,53 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
   opencl::IterationSizes size = device_sizes(c);
   size.sums_stay = !c.s.host_history;
   open_device().run(gd, c.prm, size, x, c.acc, count, whole ? friction_pass : friction_after,
-                    whole ? c.s.accurate_friction : false);
+                    whole ? c.s.accurate_friction : false, w ? *w : opencl::JacobiSolve());
   if (gd.pair_slip) device_.slips_there = true;  // sent with it, or there already
   if (c.acc.pair && gd.nbr_offsets) device_.sums_there = true, device_.sums_stale = size.sums_stay;
   if (c.acc.friction_dx) device_.friction_there = true;
+}
+
+// use_opencl with jacobi: the substep's prediction, pre-stabilization, iterations and end chained
+// on the device, the positions staying there between them (its end comes back, or stays, as
+// gauss_seidel's does; carry_start takes the next start from it), where nothing between them
+// runs here: no rigid shapes, no Chebyshev step, no rows or planes found again during the
+// iterations (iterate's device_whole), no impact data (its momenta read the passes' sums and
+// positions here), no contact history made here (host_history), and none of the test switches
+// send_history_p, host_predict and host_finish.
+bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
+  const GrainsSettings& s = c.s;
+  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on &&
+         !(s.chebyshev_rho > 0 && c.iterations > GR_CHEBYSHEV_DELAY) &&
+         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
+         !(c.d.impact_impulse && c.colliders_on) && !s.host_history && !s.send_history_p &&
+         !s.host_predict && !s.host_finish;
+}
+
+// The substep's end made on the device after its iterations (write_back takes what it wrote):
+// `end` set up for it (opencl::SubstepEnd). The final collision test there too, on
+// the colliders the device's planes took (every one analytic; a mesh's distance is the host's);
+// the end stays there where the caller lets it (GrainsData::may_hold_end) and nothing here reads
+// it: no final collision test here (a mesh), no constraints' strain.
+opencl::SubstepEnd* GrainsSolver::finish_there(const SubstepContext& c, opencl::SubstepEnd* end) {
+  const size_t n = n_;
+  finished_there_ = true;
+  device_.end_P_stale = device_.end_v_stale = false;  // this end replaces the last one
+  end_P_.resize(3 * n);
+  end_v_.resize(3 * n);
+  end->P_out = end_P_.data();
+  end->v_out = end_v_.data();
+  end->keep_velocity = c.s.keep_velocity;  // the start's, as the device holds them
+  end->force = c.device_force;
+  end->force_uniform = c.force_uniform;
+  end->origin[0] = c.origin.x, end->origin[1] = c.origin.y, end->origin[2] = c.origin.z;
+  collided_there_ = c.s.final_collision_test && planes_on_device_;
+  if (collided_there_) {
+    end->colliders = plane_colliders_.data();
+    end->collider_count = plane_colliders_.size();
+  }
+  const bool test_here = c.s.final_collision_test && c.colliders_on && !collided_there_;
+  end->stay = end_stays_ = c.d.may_hold_end && !test_here && !c.constraints_on;
+  return end;
 }
 
 // the predicted positions for a device's call that takes them where the device holds them (its
@@ -1407,7 +1461,16 @@ void GrainsSolver::iterate(SubstepContext& c) {
   const bool device_whole = device && !c.shapes_on && !chebyshev &&
                             !s.update_neighbors_during_iterations &&
                             !s.update_collisions_during_iterations;
-  if (device_whole) device_passes(c, p_.data(), iterations, false, true);
+  // the Jacobi chain there (jacobi_on_device): the prediction the device holds, moved there by
+  // pre-stabilization where it ran, and the substep's end there
+  opencl::JacobiSolve w;
+  opencl::SubstepEnd end;
+  if (device_whole && c.jacobi_there) {
+    w.p_there = p_on_device_ && (stable_there_ || !stabilized_);
+    if (w.p_there) w.finish = finish_there(c, &end);
+  }
+  if (device_whole)
+    device_passes(c, w.p_there ? p_.data() : host_p(c), iterations, false, true, &w);
   device_.p_there = device_whole;  // nothing here changes p_ before the history's save
   for (int it = 0; it < iterations && !device_whole; ++it) {
     if (it > 0 && c.pairs_on && s.update_neighbors_during_iterations) find_pairs(c, false);
@@ -1537,21 +1600,29 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
   gs.pair_slip = gs.plane_slip = nullptr;
   P_stable_.resize(3 * n + 1);
   p_stable_next_.resize(3 * n + 1);
-  std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
   // until no grain moves more than kStabilizeTolerance of its radius, at most
   // constraint_iterations passes (and kStabilizeIterations): at rest one pass finds almost
   // nothing and stops. The iterations' budget bounds it: a crushed pile at 20 x 2 ran 64
   // passes in most substeps, most of the substep's work, all of it without friction.
   const int stabilize_max = std::min(kStabilizeIterations, iterations);
+  auto go_on = [&](int, float moved) {
+    ++stabilize_passes_;
+    return moved > kStabilizeTolerance;
+  };
+  // the same passes on the device (opencl/iterations.h); with the Jacobi chain there
+  // (jacobi_on_device) the start and the prediction it moves stay there
+  opencl::IterationSizes size;
   if (device) {
-    // the same passes on the device (opencl/iterations.h)
-    opencl::IterationSizes size = device_sizes(*device);
+    size = device_sizes(*device);
     if (!pairs) size.pair_entries = 0;
-    open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max, [&](int, float moved) {
-      ++stabilize_passes_;
-      return moved > kStabilizeTolerance;
-    });
+    stable_there_ =
+        device->jacobi_there && p_on_device_ &&
+        open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max, go_on, true);
+    if (stable_there_) return;
+    host_p(*device);  // the prediction here (and the start, where it was held there)
   }
+  std::copy(P0_, P0_ + 3 * n, P_stable_.begin());
+  if (device) open_device().stabilize(gs, ps, size, P_stable_.data(), stabilize_max, go_on);
   for (int k = 0; k < stabilize_max && !device; ++k) {
     const float* x = P_stable_.data();
     float* next = p_stable_next_.data();
@@ -1942,13 +2013,8 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   if (planes) sync_planes();
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
-  const float dt = s.dt;
-  const float* P = g.P;
-  // what a stuck contact remembers at most: gr_pair_history_cap, gr_plane_history_cap
-  auto capped = [](gr_float3 h, float cap) {
-    const float l = gr_length(h);
-    return l > cap ? gr_scale(h, cap / l) : h;
-  };
+  // the iterations' end where the device holds it (device_passes), which it then reads there
+  const bool p_there = p == p_.data() && device_.p_there && !s.send_history_p;
   hist_id_.resize(n);
   for (size_t i = 0; i < n; ++i) hist_id_[i] = grain_id(d, i);
   // pairs: one slip per entry of the rows (0: the contact did not push in the substep), so that
@@ -1957,10 +2023,9 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   hist_slip_.resize(pairs ? 3 * size_t(neighbors_.offsets.back()) : 0);
   // on the device where its search's rows are: they stay there (hist_slip_ is then the
   // device's until sync_history)
-  const bool pairs_there =
-      pairs && device &&
-      open_device().save_pair_history(g, prm, device_sizes(*device), p, pair_normal_.data(),
-                                      p == p_.data() && device_.p_there && !s.send_history_p);
+  const bool pairs_there = pairs && device &&
+                           open_device().save_pair_history(g, prm, device_sizes(*device), p,
+                                                           pair_normal_.data(), p_there);
   device_.hist_stale = pairs_there;
   hist_saved_device_ += pairs_there;
   // the host reads them, and the rows, which the next substep's lookup reads (hist_rows_)
@@ -1969,7 +2034,15 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
     sync_slips(), sync_sums(), sync_rows();
     gh.nbr_indices = neighbors_.indices.data();
   }
+  // the planes' slips, an entry each (plane_saved_), then those of the planes that pushed; made
+  // on the device where the iterations' end is there
+  bool planes_there = false;
   if (planes) {
+    plane_saved_.resize(3 * size_t(plane_offsets_[n]));
+    planes_there = device && p_there &&
+                   open_device().save_plane_history(g, prm, device_sizes(*device),
+                                                    collider_normal_.data(), plane_saved_.data());
+    hist_plane_saved_device_ += planes_there;
     hist_plane_offsets_.assign(n + 1, 0);
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i) {
@@ -1984,23 +2057,22 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   } else {
     hist_plane_offsets_.assign(n + 1, 0);
   }
+  // the iterations' end and the pre-stabilized start, where the host makes a part of the history
+  // the device's end left there
+  if (finished_there_ && p == p_.data() && ((pairs && !pairs_there) || (planes && !planes_there)) &&
+      !device_.device->fetch_run(p_.data(), stable_there_ ? P_stable_.data() : nullptr, n))
+    throw std::logic_error("grains: the device no longer holds the iterations' end");
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
-    const int ii = static_cast<int>(i);
     if (pairs && !pairs_there)
       save_pair_slips(gh, prm, p, pair_normal_.data(), i, hist_slip_.data());
     if (!planes) continue;
-    const gr_float3 di = gr_sub(gr_load3(p, ii), gr_load3(P, ii));
+    if (!planes_there) save_plane_slips(g, prm, p, collider_normal_.data(), i, plane_saved_.data());
     uint32_t m = hist_plane_offsets_[i];
     for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
       if (!(collider_normal_[e] > 0.0f)) continue;
-      const float* pl = &plane_[9 * size_t(e)];
-      const gr_float3 nn = gr_make3(pl[3], pl[4], pl[5]);
-      gr_float3 dx = gr_madd(di, gr_make3(pl[6], pl[7], pl[8]), -dt);
-      dx = gr_add(dx, gr_load3(plane_slip_.data(), static_cast<int>(e)));
       hist_plane_collider_[m] = plane_collider_[e];
-      gr_store3(hist_plane_slip_.data(), static_cast<int>(m),
-                capped(gr_madd(dx, nn, -gr_dot(dx, nn)), gr_plane_history_cap(&g, &prm, ii, collider_normal_[e])));
+      std::copy_n(&plane_saved_[3 * size_t(e)], 3, &hist_plane_slip_[3 * size_t(m)]);
       ++m;
     }
   }

@@ -25,6 +25,8 @@ namespace opencl {
 class Iterations;
 struct IterationSizes;
 struct SequentialContacts;
+struct SubstepEnd;
+struct JacobiSolve;
 struct Traffic;
 }
 
@@ -72,16 +74,18 @@ struct GrainsSettings {
   // index. The solver takes it by itself for such a device (use_opencl on a GPU); set, the CPU
   // path sweeps the device's order (the tests compare the two)
   bool sweep_waves = false;
-  // use_opencl with gauss_seidel: the host ends the substep (velocity update) even where the
-  // device could (SequentialSolve::Finish), bringing the solved positions back (the tests
-  // compare the two)
+  // use_opencl: the host ends the substep (velocity update) even where the device could
+  // (SubstepEnd), bringing the solved positions back; with jacobi the whole chain on the
+  // device is off (GrainsSolver::jacobi_on_device: the host predicts and pre-stabilizes too).
+  // The tests compare the two.
   bool host_finish = false;
   // use_opencl: every substep's start positions and velocities go up whole, even where the
   // device makes them from the last substep's end (GrainsSolver::carry_start; the tests compare
   // the two)
   bool resend_start = false;
-  // use_opencl with gauss_seidel: the host's predicted positions go up, even where the device
-  // makes the same floats (GrainsSolver::predict; the tests compare the two)
+  // use_opencl (gauss_seidel, or jacobi's chain there): the host's predicted positions go up,
+  // even where the device makes the same floats (GrainsSolver::predict; the tests compare the
+  // two)
   bool host_predict = false;
   // use_opencl with gauss_seidel: the collider planes' rows and colliders come back every
   // substep, even where the device compares them with the contact list's (the tests compare the
@@ -219,6 +223,8 @@ class GrainsSolver {
   // those whose carried slips it looked up by id there (rather than finding them in place)
   size_t histories_saved_on_device() const { return hist_saved_device_; }
   size_t histories_looked_up_on_device() const { return hist_lookups_device_; }
+  // ... and those whose collider planes' slips it saved
+  size_t plane_histories_saved_on_device() const { return hist_plane_saved_device_; }
   const std::vector<gr_seq_contact>& contact_list() const {
     sync_contacts();
     return seq_;
@@ -288,7 +294,7 @@ class GrainsSolver {
   // use_opencl: what has crossed between the host and the device since the solver opened it
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
-  // whether the device ended the last substep (velocity update, SequentialSolve::Finish), whether
+  // whether the device ended the last substep (velocity update, SubstepEnd), whether
   // its final collision test ran there too (every collider analytic), and how many grains the
   // host's final collision test moved after the device's end (their positions alone go up for
   // the overlap statistics)
@@ -396,7 +402,10 @@ class GrainsSolver {
   void gauss_seidel(SubstepContext& c);
   void run_friction(SubstepContext& c);
   void project_pins(SubstepContext& c);
-  void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole);
+  void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole,
+                     const opencl::JacobiSolve* w = nullptr);
+  opencl::SubstepEnd* finish_there(const SubstepContext& c, opencl::SubstepEnd* end);
+  bool jacobi_on_device(const SubstepContext& c) const;
   opencl::Iterations& open_device();
   opencl::IterationSizes device_sizes(const SubstepContext& c) const;
 
@@ -465,7 +474,7 @@ class GrainsSolver {
          rows_tests_device_ = 0;  // host_predictions(), rows_tests_on_device()
   // the written positions (d.P) error control's statistics sent to the device this substep
   mutable const float* written_on_device_ = nullptr;
-  // gauss_seidel's device solve ended the substep there (SequentialSolve::Finish): each grain's
+  // gauss_seidel's device solve ended the substep there (SubstepEnd): each grain's
   // written position (world) and velocity in end_P_ and end_v_ (n x 3), which write_back takes
   // for its own; the device keeps those positions, and write_back lists in end_changed_ the
   // grains its final collision test moved, which contact_stats and the sleeping test send alone;
@@ -482,8 +491,11 @@ class GrainsSolver {
   // d.v do not hold: start_stays() says whether every stage reads it there, fetch_start()
   // brings it into d.P and d.v (and P0_) for one that does not; end_origin_: the origin the
   // held end's box gives (local_origin's); end_stays_: the device's end of this substep stays
-  // there (SequentialSolve::Finish::stay), which write_back keeps when every grain is finite
+  // there (SubstepEnd::stay), which write_back keeps when every grain is finite
   bool start_held_ = false, end_stays_ = false;
+  // pre-stabilization ran this substep; on the device, where the start and the prediction it
+  // moved stay (the Jacobi chain there: jacobi_on_device)
+  bool stabilized_ = false, stable_there_ = false;
   Vec3 end_origin_;
   size_t held_ends_ = 0, held_starts_ = 0;
   bool start_stays(const GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
@@ -659,6 +671,8 @@ class GrainsSolver {
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once
   // they are rebuilt), and per grain a row of (collider, slip)
   size_t hist_saved_device_ = 0, hist_lookups_device_ = 0;  // histories_saved_on_device() ...
+  size_t hist_plane_saved_device_ = 0;
+  std::vector<float> plane_saved_;  // (plane entries x 3) m: each entry's slip, before the cut
   std::vector<int32_t> hist_id_;
   std::vector<int32_t> hist_lookup_;  // id -> index into hist_id_ (-1: none), ids >= 0
   NeighborList hist_rows_;

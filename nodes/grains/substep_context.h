@@ -27,10 +27,13 @@ struct GrainsSolver::SubstepContext {
   bool same_rows = false;  // they were: this substep's rows are the last one's
   const float* search_radius = nullptr;
   NeighborQuery q;
-  // use_opencl with gauss_seidel: g's force as the device reads it (device_force), made once a
-  // substep for the prediction and the end there
+  // use_opencl (gauss_seidel, or jacobi_there): g's force as the device reads it (device_force),
+  // made once a substep for the prediction and the end there
   const float* device_force = nullptr;
   bool force_uniform = false;
+  // use_opencl with jacobi: the prediction, pre-stabilization, iterations and end chained on the
+  // device (GrainsSolver::jacobi_on_device)
+  bool jacobi_there = false;
 };
 
 // The final collision test of one grain moving from a to b (world) with velocity v, radius r and

@@ -1,13 +1,14 @@
-/* The Jacobi path's contact history between grains (GrainsSolver::save_history and
- * load_history), grain by grain: the host runs these functions through
- * nodes/grains/history.cpp, a device through opencl/grains.cl (gr_k_save_pair_slips,
- * gr_k_load_pair_slips), and both write the same floats: every product and sum is written out
- * without a multiply and an add fused (the device's FP_CONTRACT off here, the host's file
- * compiled with -ffp-contract=off) and without OpenCL's dot(), whose order a device chooses.
+/* The Jacobi path's contact history (GrainsSolver::save_history and load_history), grain by
+ * grain: the host runs these functions through nodes/grains/history.cpp, a device through
+ * opencl/grains.cl (gr_k_save_pair_slips, gr_k_load_pair_slips, gr_k_save_plane_slips), and both
+ * write the same floats: every product and sum is written out without a multiply and an add
+ * fused (the device's FP_CONTRACT off here, the host's file compiled with -ffp-contract=off) and
+ * without OpenCL's dot(), whose order a device chooses.
  *
- * Each entry of a grain's neighbour row keeps a slip (3 floats): what the contact slid
- * tangentially in the substep and did not give back, which the next substep's friction removes
- * with its own (kernels/contact.h, gr_pair_history_cap). */
+ * Each entry of a grain's neighbour row, and of its row of collider planes, keeps a slip (3
+ * floats): what the contact slid tangentially in the substep and did not give back, which the
+ * next substep's friction removes with its own (kernels/contact.h, gr_pair_history_cap,
+ * gr_plane_history_cap). */
 #ifndef GRAINS_KERNELS_HISTORY_H
 #define GRAINS_KERNELS_HISTORY_H
 #include "contact.h"
@@ -47,6 +48,35 @@ GR_INLINE void gr_save_pair_slips(const gr_grains* g, const gr_params* prm,
       if (l > cap) h = gr_scale(h, cap / l);
     }
     gr_store3(out, (int)k, h);
+  }
+}
+
+/* Grain i's collider-plane slips saved at the end of the substep into out (3 floats an entry of
+ * its row of planes, g->plane_offsets and g->plane: a point, the normal and the collider's
+ * velocity, 3 floats each): for an entry whose plane pushed in the substep (collider_normal, its
+ * summed normal correction, above 0), the tangential part of the grain's move (p less the start
+ * g->P) less the collider's own over dt, plus the slip it carried in (g->plane_slip), at most
+ * gr_plane_history_cap long; 0 for the others. */
+GR_INLINE void gr_save_plane_slips(const gr_grains* g, const gr_params* prm,
+                                   const GR_GLOBAL float* p, const GR_GLOBAL float* collider_normal,
+                                   int i, GR_GLOBAL float* out) {
+  GR_ROW_EXACT
+  const gr_float3 di = gr_sub(gr_load3(p, i), gr_load3(g->P, i));
+  gr_uint e;
+  for (e = g->plane_offsets[i]; e < g->plane_offsets[i + 1]; ++e) {
+    const float a = collider_normal[e];
+    gr_float3 h = gr_make3(0.0f, 0.0f, 0.0f);
+    if (a > 0.0f) {
+      const GR_GLOBAL float* pl = g->plane + 9 * (size_t)e;
+      const gr_float3 nn = gr_make3(pl[3], pl[4], pl[5]);
+      const gr_float3 dx = gr_add(gr_sub(di, gr_scale(gr_make3(pl[6], pl[7], pl[8]), prm->dt)),
+                                  gr_load3(g->plane_slip, (int)e));
+      h = gr_sub(dx, gr_scale(nn, gr_history_dot(dx, nn)));
+      const float cap = gr_plane_history_cap(g, prm, i, a);
+      const float l = gr_sqrt(gr_history_dot(h, h));
+      if (l > cap) h = gr_scale(h, cap / l);
+    }
+    gr_store3(out, (int)e, h);
   }
 }
 

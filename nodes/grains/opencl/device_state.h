@@ -158,11 +158,20 @@ struct Iterations::Impl {
   // the Jacobi path's: a pass, and the largest move's parts
   cl_kernel stabilize_grains = nullptr, largest_part = nullptr;
   Buffer moved, moved_part;
+  // ... and where the start stays there (stabilize's `there`): the prediction it moves
+  // (gr_k_shift, into `shifted`), and for how many grains `start` holds this substep's start as
+  // it went up (0: none)
+  cl_kernel shift = nullptr;
+  Buffer shifted;
+  size_t start_kept = 0;
   // the Jacobi path's contact history (history.cpp, kernels/history.h): the kernels, the slips
   // the last save wrote (hist_entries of them, of hist_grains grains) with the rows they belong
   // to, the last substep's ids and each id's index there
   cl_kernel save_pair_slips = nullptr, history_table = nullptr, load_pair_slips = nullptr;
   Buffer hist_slip, hist_offsets, hist_indices, hist_id, hist_table;
+  // the collider planes' saved slips (save_plane_history), which come back
+  cl_kernel save_plane_slips = nullptr;
+  Buffer plane_saved;
   size_t hist_entries = 0, hist_grains = 0;
   bool hist_saved = false;  // hist_slip and its rows hold the last save's
   // what the save and the load send, staged (held: a write reads them late, and the host
@@ -261,7 +270,7 @@ struct Iterations::Impl {
                       &seq_old, &seq_offsets, &seq_table_slots, &seq_block_start, &seq_links_bits,
                       &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
                       &wave_ends, &block_waves, &hist_slip, &hist_offsets, &hist_indices,
-                      &hist_id, &hist_table})
+                      &hist_id, &hist_table, &plane_saved, &shifted})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -286,7 +295,7 @@ struct Iterations::Impl {
                         finish, scatter3, final_collision, carry, predict, plane_same,
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table,
-                        load_pair_slips, row_longest})
+                        load_pair_slips, row_longest, save_plane_slips, shift})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -414,6 +423,13 @@ struct Iterations::Impl {
   // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
   // once past their count
   void launch(cl_kernel k, size_t items);
+  // The substep's end from the positions `result` (SubstepEnd: gr_k_finish, then
+  // the final collision test from the start start_there holds), kept for carry_start and
+  // brought back unless it stays; the start velocities are there already when velocity_there,
+  // else g.v goes up (once)
+  void finish_substep(const gr_grains& g, const gr_params& prm, const HostArray* inputs,
+                      Buffer* result, const SubstepEnd& e, bool velocity_there,
+                      Buffer* start_there, size_t n);
   // n grains' positions (3 n floats) from `from` into `to`, and a zero past them, as an upload
   // of positions has (one float past the last grain, which the contact loop's block loads read)
   void copy_positions(Buffer& to, const Buffer& from, size_t n);

@@ -382,6 +382,15 @@ __kernel void gr_k_warm_apply(__global float* p, __global gr_seq_contact* seq,
   }
 }
 
+/* what the Jacobi path's pre-stabilization moved the start, added to the predicted positions:
+ * out = p + (x - P), float k of `floats`, as GrainsSolver::pre_stabilize adds them */
+__kernel void gr_k_shift(__global const float* p, __global const float* x,
+                         __global const float* P, __global float* out, int floats) {
+  const int k = (int)get_global_id(0);
+  if (k >= floats) return;
+  out[k] = p[k] + (x[k] - P[k]);
+}
+
 /* one pass of the Jacobi path's pre-stabilization: next = gr_stabilize(x), and each grain's
  * move over its radius in moved (the host stops on the largest, gr_k_largest) */
 __kernel void gr_k_stabilize_grains(gr_params prm, GR_GRAINS_ARGS, __global const float* x,
@@ -407,6 +416,17 @@ __kernel void gr_k_save_pair_slips(gr_params prm, GR_GRAINS_ARGS, __global const
   {
     const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
     gr_save_pair_slips(&g, &prm, p, pair_normal, i, out);
+  }
+}
+
+__kernel void gr_k_save_plane_slips(gr_params prm, GR_GRAINS_ARGS, __global const float* p,
+                                    __global const float* collider_normal, __global float* out,
+                                    int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_save_plane_slips(&g, &prm, p, collider_normal, i, out);
   }
 }
 

@@ -69,6 +69,34 @@ bool Iterations::save_pair_history(const gr_grains& g, const gr_params& prm,
   return true;
 }
 
+bool Iterations::save_plane_history(const gr_grains& g, const gr_params& prm,
+                                    const IterationSizes& size, const float* collider_normal,
+                                    float* out) {
+  Impl& m = *impl_;
+  const size_t n = size.n, entries = size.plane_entries, f = sizeof(float);
+  if (n == 0 || !g.plane_offsets || !m.run_out || m.run_out_n != n) return false;
+  if (entries == 0) return true;  // (nothing to save: the planes' slips may be unset)
+  if (!g.plane_slip) return false;
+  // the grains' arrays and the planes as run() bound them (no call has sent others since:
+  // run_out_n), the sums as it brought them back
+  HostArray a[kArrays];
+  grain_arrays(g, size, a);
+  HostArray bound[kArrays] = {};
+  for (int k : {kP, kRadius, kFriction, kPlaneOffsets, kPlane, kPlaneSlip}) bound[k] = a[k];
+  m.upload_once(m.collider_sum, collider_normal, entries * f);
+  m.plane_saved.reserve(m.ctx, 3 * entries * f, m.largest);
+  cl_kernel k = m.kernel(m.save_plane_slips, "gr_k_save_plane_slips");
+  const int count = static_cast<int>(n);
+  m.set_grains(k, prm, g, bound);
+  set_buffer(k, kFirstOwn, m.run_out);
+  set_buffer(k, kFirstOwn + 1, &m.collider_sum);
+  set_buffer(k, kFirstOwn + 2, &m.plane_saved);
+  check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
+  m.launch(k, n);
+  m.download(m.plane_saved, out, 3 * entries * f);
+  return true;
+}
+
 bool Iterations::load_pair_history(const IterationSizes& size, bool kept, const int* id,
                                    const int* hist_id, size_t hist_n, size_t table_size) {
   Impl& m = *impl_;

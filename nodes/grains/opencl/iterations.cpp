@@ -105,6 +105,7 @@ void Iterations::begin_substep() {
   impl_->p_taken = nullptr;
   impl_->carry_from_n = 0;
   impl_->run_out_n = 0;
+  impl_->start_kept = 0;
 }
 
 bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
@@ -309,13 +310,15 @@ void Iterations::Impl::project_pins(Buffer* x, size_t global) {
 
 void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
                      const gr_normal_sums& acc, int iterations, bool friction_pass,
-                     bool accurate_friction) {
+                     bool accurate_friction, const JacobiSolve& w) {
   Impl& m = *impl_;
   const size_t n = size.n;
   if (n == 0) return;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   HostArray inputs[kArrays];
-  m.upload_grains(g, size, p, inputs);
+  const bool p_there = w.p_there && m.p_taken && m.p_taken_n == n;
+  m.upload_grains(g, size, p_there ? nullptr : p, inputs);
+  if (p_there) m.copy_positions(m.p, *m.p_taken, n);
   const bool pairs = acc.pair && g.nbr_offsets;
   if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f, m.largest);
   if (size.sums_there)
@@ -370,12 +373,17 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   }
   if (friction_pass && !accurate_friction) pass(m.friction);
 
-  m.download(*from, p, 3 * n * f);
+  if (w.finish)
+    m.finish_substep(g, prm, inputs, from, *w.finish, false,
+                     m.start_kept == n ? &m.start : &m.arrays[kP], n);
+  else
+    m.download(*from, p, 3 * n * f);
   m.run_out = from, m.run_out_n = n;
   if (!size.sums_stay) m.download(m.pair_sum, acc.pair, size.pair_entries * u);
   // (save_pair_history: the device's are the sums, whether or not they came back)
   if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
   m.download(m.collider_sum, acc.collider, size.plane_entries * f);
+  if (acc.collider) m.copied_once(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
 }
 
@@ -522,11 +530,13 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
   return from;
 }
 
-void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
-                           float* x, int most, const std::function<bool(int, float)>& go_on) {
+bool Iterations::stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                           float* x, int most, const std::function<bool(int, float)>& go_on,
+                           bool there) {
   Impl& m = *impl_;
   const size_t n = size.n;
-  if (n == 0 || most <= 0) return;
+  if (there && !(m.p_taken && m.p_taken_n == n)) return false;
+  if (n == 0 || most <= 0) return true;
   const size_t f = sizeof(float);
   constexpr size_t kParts = 16 * kGroup;  // gr_k_largest's work-items
   if (!m.stabilize_grains) {
@@ -537,7 +547,8 @@ void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const Itera
     check(status, "clCreateKernel(gr_k_largest)");
   }
   HostArray inputs[kArrays];
-  m.upload_grains(g, size, x, inputs);  // x to m.p; m.next made room for
+  m.upload_grains(g, size, there ? nullptr : x, inputs);  // x to m.p; m.next made room for
+  if (there) m.copy_positions(m.p, m.arrays[kP], n);
   m.moved.reserve(m.ctx, n * f, m.largest);
   m.moved_part.reserve(m.ctx, kParts * f, m.largest);
   const int count = static_cast<int>(n);
@@ -566,7 +577,32 @@ void Iterations::stabilize(const gr_grains& g, const gr_params& prm, const Itera
     for (const float v : part) moved = std::max(moved, v);
     if (!go_on(pass, moved)) break;
   }
-  m.download(*from, x, 3 * n * f);
+  if (!there) {
+    m.download(*from, x, 3 * n * f);
+    return true;
+  }
+  // the start as it went up, for the final collision test; the prediction moved with it, into
+  // a buffer of its own (the search's copy stays the rows' positions); then the start replaced
+  m.copy_positions(m.start, m.arrays[kP], n);
+  m.start_kept = n;
+  m.shifted.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+  cl_kernel shift = m.kernel(m.shift, "gr_k_shift");
+  const int floats = static_cast<int>(3 * n);
+  arg(shift, 0, *m.p_taken), arg(shift, 1, *from), arg(shift, 2, m.arrays[kP]);
+  arg(shift, 3, m.shifted), arg(shift, 4, floats);
+  m.launch(shift, 3 * n);
+  m.p_taken = &m.shifted;
+  m.copy_positions(m.arrays[kP], *from, n);
+  m.copied_once(m.arrays[kP], x, 3 * n * f);
+  return true;
+}
+
+bool Iterations::fetch_run(float* p, float* start, size_t n) {
+  Impl& m = *impl_;
+  if (!m.run_out || m.run_out_n != n || (start && m.start_kept != n)) return false;
+  m.download(*const_cast<Buffer*>(m.run_out), p, 3 * n * sizeof(float));
+  if (start) m.download(m.arrays[kP], start, 3 * n * sizeof(float));
+  return true;
 }
 
 void Iterations::Impl::each_part(cl_kernel k, cl_uint seq_arg, const SequentialContacts& s,
@@ -774,60 +810,9 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
 
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
-  if (const SequentialSolve::Finish* end = w.finish) {
-    // the substep's end here: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n,
-    // keep (the start velocities as pre-stabilization left them, or as they are)
-    if (!velocities) m.upload_once(m.velocity, g.v, 3 * n * f);
-    const int uniform = end->force_uniform ? 1 : 0;
-    m.upload_once(m.force, end->force, (uniform ? 3 : 3 * n) * f);
-    m.stats_P.reserve(m.ctx, 3 * n * f, m.largest);
-    if (end->v_out) m.end_v.reserve(m.ctx, 3 * n * f, m.largest);
-    cl_kernel k = m.kernel(m.finish, "gr_k_finish");
-    m.set_grains(k, prm, g, inputs);
-    set_buffer(k, kFirstOwn, &m.velocity);
-    set_buffer(k, kFirstOwn + 1, end->force ? &m.force : nullptr);
-    check(clSetKernelArg(k, kFirstOwn + 2, sizeof(int), &uniform), "clSetKernelArg");
-    set_buffer(k, kFirstOwn + 3, result);
-    for (cl_uint a = 0; a < 3; ++a)
-      check(clSetKernelArg(k, kFirstOwn + 4 + a, sizeof(float), &end->origin[a]), "clSetKernelArg");
-    set_buffer(k, kFirstOwn + 7, &m.stats_P);
-    set_buffer(k, kFirstOwn + 8, end->v_out ? &m.end_v : nullptr);
-    check(clSetKernelArg(k, kFirstOwn + 9, sizeof(int), &count), "clSetKernelArg");
-    const int keep = end->keep_velocity ? 1 : 0;
-    check(clSetKernelArg(k, kFirstOwn + 10, sizeof(int), &keep), "clSetKernelArg");
-    per_grain(k);
-    if (final_test) {
-      // the final collision test of what it wrote: prm, grains, colliders, count, start,
-      // origin, P_out, v_out, n (the colliders the planes took, sent once a substep)
-      const int colliders = static_cast<int>(end->collider_count);
-      m.upload_once(m.plane_colliders, end->colliders, colliders * sizeof(gr_collider));
-      cl_kernel c = m.kernel(m.final_collision, "gr_k_final_collision");
-      m.set_grains(c, prm, g, inputs);
-      set_buffer(c, kFirstOwn, &m.plane_colliders);
-      check(clSetKernelArg(c, kFirstOwn + 1, sizeof(int), &colliders), "clSetKernelArg");
-      set_buffer(c, kFirstOwn + 2, w.x ? &m.start : &m.arrays[kP]);
-      for (cl_uint a = 0; a < 3; ++a)
-        check(clSetKernelArg(c, kFirstOwn + 3 + a, sizeof(float), &end->origin[a]),
-              "clSetKernelArg");
-      set_buffer(c, kFirstOwn + 6, &m.stats_P);
-      set_buffer(c, kFirstOwn + 7, &m.end_v);
-      check(clSetKernelArg(c, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
-      per_grain(c);
-    }
-    m.written_n = n;
-    // what it wrote, kept for the next substep's start (carry_start): the positions copied
-    // (the statistics patch stats_P with the host's), the velocities where they are (nothing
-    // else writes end_v)
-    m.carry_P.reserve(m.ctx, 3 * n * f, m.largest);
-    check(clEnqueueCopyBuffer(m.queue, m.stats_P.mem, m.carry_P.mem, 0, 0, 3 * n * f, 0, nullptr,
-                              nullptr),
-          "clEnqueueCopyBuffer");
-    m.carry_n = n;
-    m.carry_v_n = end->v_out ? n : 0;
-    if (!end->stay) {
-      m.download(m.stats_P, end->P_out, 3 * n * f);
-      m.download(m.end_v, end->v_out, 3 * n * f);
-    }
+  if (w.finish) {
+    m.finish_substep(g, prm, inputs, result, *w.finish, velocities, w.x ? &m.start : &m.arrays[kP],
+                     n);
   } else {
     m.download(*result, p, 3 * n * f);
     if (w.x) m.download(m.stable, w.x, 3 * n * f);
@@ -843,6 +828,66 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
     m.each_part(k, 0, s);
     m.download(m.seq_loaded_count, &count_loaded, sizeof count_loaded);
     *s.loaded = count_loaded;
+  }
+}
+
+void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
+                                      const HostArray* inputs, Buffer* result, const SubstepEnd& e,
+                                      bool velocity_there, Buffer* start_there, size_t n) {
+  const SubstepEnd* end = &e;
+  const size_t f = sizeof(float);
+  const int count = static_cast<int>(n);
+  const bool final_test = end->colliders && end->v_out;
+  // the substep's end: prm, grains, v, force, force_uniform, p, origin, P_out, v_out, n, keep
+  // (the start velocities as pre-stabilization left them there, or as they are)
+  if (!velocity_there) upload_once(velocity, g.v, 3 * n * f);
+  const int uniform = end->force_uniform ? 1 : 0;
+  upload_once(force, end->force, (uniform ? 3 : 3 * n) * f);
+  stats_P.reserve(ctx, 3 * n * f, largest);
+  if (end->v_out) end_v.reserve(ctx, 3 * n * f, largest);
+  cl_kernel k = kernel(finish, "gr_k_finish");
+  set_grains(k, prm, g, inputs);
+  set_buffer(k, kFirstOwn, &velocity);
+  set_buffer(k, kFirstOwn + 1, end->force ? &force : nullptr);
+  check(clSetKernelArg(k, kFirstOwn + 2, sizeof(int), &uniform), "clSetKernelArg");
+  set_buffer(k, kFirstOwn + 3, result);
+  for (cl_uint a = 0; a < 3; ++a)
+    check(clSetKernelArg(k, kFirstOwn + 4 + a, sizeof(float), &end->origin[a]), "clSetKernelArg");
+  set_buffer(k, kFirstOwn + 7, &stats_P);
+  set_buffer(k, kFirstOwn + 8, end->v_out ? &end_v : nullptr);
+  check(clSetKernelArg(k, kFirstOwn + 9, sizeof(int), &count), "clSetKernelArg");
+  const int keep = end->keep_velocity ? 1 : 0;
+  check(clSetKernelArg(k, kFirstOwn + 10, sizeof(int), &keep), "clSetKernelArg");
+  launch(k, n);
+  if (final_test) {
+    // the final collision test of what it wrote: prm, grains, colliders, count, start,
+    // origin, P_out, v_out, n (the colliders the planes took, sent once a substep)
+    const int colliders = static_cast<int>(end->collider_count);
+    upload_once(plane_colliders, end->colliders, colliders * sizeof(gr_collider));
+    cl_kernel c = kernel(final_collision, "gr_k_final_collision");
+    set_grains(c, prm, g, inputs);
+    set_buffer(c, kFirstOwn, &plane_colliders);
+    check(clSetKernelArg(c, kFirstOwn + 1, sizeof(int), &colliders), "clSetKernelArg");
+    set_buffer(c, kFirstOwn + 2, start_there);
+    for (cl_uint a = 0; a < 3; ++a)
+      check(clSetKernelArg(c, kFirstOwn + 3 + a, sizeof(float), &end->origin[a]), "clSetKernelArg");
+    set_buffer(c, kFirstOwn + 6, &stats_P);
+    set_buffer(c, kFirstOwn + 7, &end_v);
+    check(clSetKernelArg(c, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+    launch(c, n);
+  }
+  written_n = n;
+  // what it wrote, kept for the next substep's start (carry_start): the positions copied
+  // (the statistics patch stats_P with the host's), the velocities where they are (nothing
+  // else writes end_v)
+  carry_P.reserve(ctx, 3 * n * f, largest);
+  check(clEnqueueCopyBuffer(queue, stats_P.mem, carry_P.mem, 0, 0, 3 * n * f, 0, nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  carry_n = n;
+  carry_v_n = end->v_out ? n : 0;
+  if (!end->stay) {
+    download(stats_P, end->P_out, 3 * n * f);
+    download(end_v, end->v_out, 3 * n * f);
   }
 }
 

@@ -98,7 +98,30 @@ struct SequentialContacts {
   const gr_params* others_prm = nullptr;
 };
 
-// What contact_solver gauss_seidel's device solve does before its passes (solve_sequential)
+// The substep's end on the device after its passes (gr_k_finish: gr_update_velocity; run() and
+// solve_sequential()), instead of bringing back p, the pre-stabilized start and the velocities:
+// each grain's written position, in world coordinates (the substep's plus origin, as
+// GrainsSolver::write_back adds them), into P_out and, when v_out is set, its velocity (3 n floats
+// each; with keep_velocity the start's, as the device holds them, and not gr_update_velocity's).
+// force: gr_grains' force as the device reads it, a row a grain (3 n floats) or, with
+// force_uniform, one row for every grain; null: none. The written positions stay there for
+// row_overlaps() (written_there). With `colliders` (collider_count analytic colliders, the array
+// the substep's find_planes() took, and v_out) the final collision test follows there
+// (gr_k_final_collision), from the start as it went up.
+struct SubstepEnd {
+  float* P_out = nullptr;
+  float* v_out = nullptr;
+  bool keep_velocity = false;
+  const float* force = nullptr;
+  bool force_uniform = false;
+  float origin[3] = {0.0f, 0.0f, 0.0f};
+  const gr_collider* colliders = nullptr;
+  size_t collider_count = 0;
+  // what it wrote stays there, P_out and v_out unwritten until fetch_end() brings them (v_out
+  // still says whether the velocities are written)
+  bool stay = false;
+};
+
 struct SequentialSolve {
   // pre-stabilization (gr_seq_stabilize) of the start positions and p, pass after pass while
   // go_on(pass, the pass's largest move) says so, at most `most` passes; x (3 n floats, out
@@ -119,30 +142,17 @@ struct SequentialSolve {
   bool take_back = false;
   float* v = nullptr;
   float inv_last = 0.0f;
-  // The substep's end there (gr_k_finish: gr_update_velocity), instead of bringing back p, the
-  // pre-stabilized start (x) and the velocities: each grain's written position, in world
-  // coordinates (the substep's plus origin, as GrainsSolver::write_back adds them), into P_out
-  // and, when v_out is set, its velocity (3 n floats each; with keep_velocity the start's, as
-  // the device holds them, and not gr_update_velocity's). force: gr_grains' force as the
-  // device reads it, a row a grain (3 n floats) or, with force_uniform, one row for every
-  // grain; null: none. The written positions stay there for row_overlaps() (written_there).
-  // With `colliders` (collider_count analytic colliders, the array the substep's find_planes()
-  // took, and v_out) the final collision test follows there (gr_k_final_collision), from the
-  // start as it went up.
-  struct Finish {
-    float* P_out = nullptr;
-    float* v_out = nullptr;
-    bool keep_velocity = false;
-    const float* force = nullptr;
-    bool force_uniform = false;
-    float origin[3] = {0.0f, 0.0f, 0.0f};
-    const gr_collider* colliders = nullptr;
-    size_t collider_count = 0;
-    // what it wrote stays there, P_out and v_out unwritten until fetch_end() brings them (v_out
-    // still says whether the velocities are written)
-    bool stay = false;
-  };
-  const Finish* finish = nullptr;
+  const SubstepEnd* finish = nullptr;
+};
+
+// run()'s positions and end on the device. p_there: p (as it comes in) is the positions the
+// device holds (holds_prediction(): its prediction as a search or the planes took it, or as
+// stabilize() moved it there), copied there rather than sent. finish: the substep's end there
+// after the passes (SubstepEnd, with the final collision test from the start as it
+// went up), p then not brought back.
+struct JacobiSolve {
+  bool p_there = false;
+  const SubstepEnd* finish = nullptr;
 };
 
 // What crosses between the host and the device: bytes each way, and the transfers that carried
@@ -166,9 +176,11 @@ class Iterations {
   // them; none when !friction_pass. acc's sums (pair, collider, collider_dx, friction_dx: host
   // arrays, each null when unused) are read as they start and written back as they end, but
   // for those the device holds (size.sums_there, friction_there) and keeps (sums_stay; the
-  // friction each grain received, which no host stage reads, never comes back).
+  // friction each grain received, which no host stage reads, never comes back); w: p there,
+  // and the substep's end there.
   void run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
-           const gr_normal_sums& acc, int iterations, bool friction_pass, bool accurate_friction);
+           const gr_normal_sums& acc, int iterations, bool friction_pass, bool accurate_friction,
+           const JacobiSolve& w = JacobiSolve());
 
   // `iterations` passes of contact_solver gauss_seidel on p (3 n + 1 floats, in and out): each
   // the others' Jacobi group, then the contacts colour by colour, then the pins (g.targetP);
@@ -203,6 +215,13 @@ class Iterations {
   // nothing is changed then.
   bool save_pair_history(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
                          const float* p, const gr_uint* pair_normal, bool p_there = false);
+  // The collider planes' slips saved at the substep's end (gr_save_plane_slips) into out (3
+  // floats an entry of the planes' rows, brought back), from the positions the last run() ended
+  // with and the planes, their carried slips and the summed normal corrections as it left them
+  // there (collider_normal: the host's copy of those, sent only if the device holds others).
+  // False where the device holds no run() of n grains since its arrays were last sent.
+  bool save_plane_history(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
+                          const float* collider_normal, float* out);
   bool load_pair_history(const IterationSizes& size, bool kept, const int* id, const int* hist_id,
                          size_t hist_n, size_t table_size);
   // the last save's slips (3 floats an entry) and, into *rows where given, the rows they belong
@@ -223,8 +242,8 @@ class Iterations {
     float largest = 0;
     double sum = 0;
   };
-  // written_there: the device holds P as the last solve's finish wrote it (SequentialSolve::
-  // Finish), but for the grains this lists, which go up alone (all of P goes up when the
+  // written_there: the device holds P as the last substep's end there wrote it (SubstepEnd),
+  // but for the grains this lists, which go up alone (all of P goes up when the
   // device holds no such positions of n grains).
   bool row_overlaps(const float* P, const float* radius, size_t n, RowOverlaps* out,
                     const std::vector<gr_uint>* written_there = nullptr);
@@ -249,11 +268,20 @@ class Iterations {
   bool sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n, uint32_t* out,
                   const std::vector<gr_uint>* written_there = nullptr);
 
+  // the positions the last run() ended with (n x 3) into p and, where stabilize() kept the start
+  // there this substep, that start (g.P's buffer) into start (null: not wanted); false where the
+  // device holds no such run of n grains (nothing written then)
+  bool fetch_run(float* p, float* start, size_t n);
+
   // the Jacobi path's pre-stabilization (gr_stabilize) of the start positions x (3 n + 1
   // floats, in and out): pass after pass while go_on(pass, the largest move over a radius)
-  // says so, at most `most` passes
-  void stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* x,
-                 int most, const std::function<bool(int, float)>& go_on);
+  // says so, at most `most` passes. `there`: x begins as g.P there and stays there, unwritten
+  // (g.P's buffer takes it, named x for the calls that follow, the start as it went up kept for
+  // the final collision test), and the predicted positions the device holds (holds_prediction)
+  // move there by what the passes moved each grain (p + (x - g.P), as the host adds them);
+  // false where it holds no prediction of n grains (nothing done then).
+  bool stabilize(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* x,
+                 int most, const std::function<bool(int, float)>& go_on, bool there = false);
 
   // contact_solver gauss_seidel's solve from its contacts on, in one call (gauss_seidel.cpp's
   // steps in its order, with one upload and one download): pre-stabilization when w.x is set,
@@ -333,7 +361,7 @@ class Iterations {
   void predict(const gr_grains& g, const gr_params& prm, size_t n, const float* force,
                bool force_uniform);
   // The substep's start positions (P: host, the substep's coordinates, n x 3) and velocities (v,
-  // or null) made there from what the last end there wrote (SequentialSolve::Finish): its world
+  // or null) made there from what the last end there wrote (SubstepEnd): its world
   // positions less `origin` (as the host subtracts it) and its velocities, but for the grains
   // `changed` lists, whose host values differ from those and go up alone (16 bytes a grain for
   // the positions, 12 more for the velocities). From then on this substep's calls take P and v
@@ -387,7 +415,7 @@ class Iterations {
   // False, with nothing done, where the state is not of the last end's grains or the order is
   // neither.
   bool sleep_carry(size_t n);
-  // sleep_end(), after the substep's end there (SequentialSolve::Finish) and before
+  // sleep_end(), after the substep's end there (SubstepEnd) and before
   // end_bounds(): the sleepers put back or woken, by those of the substep's `colliders` that
   // moved (the array find_planes() sent: nothing goes up again) and along the rows the last
   // search left here (device_rows: of n grains), else along `rows` (sent; null: no rows), and

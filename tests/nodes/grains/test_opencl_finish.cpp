@@ -1,4 +1,4 @@
-// The substep's end on the OpenCL device (gr_k_finish, opencl::SequentialSolve::Finish): the
+// The substep's end on the OpenCL device (gr_k_finish, opencl::SubstepEnd): the
 // velocity update there, the final collision test there, its written positions kept there for
 // error control's overlap statistics, and the grains the host's final collision test moves
 // after it (a mesh collider) sent alone.
@@ -476,4 +476,76 @@ TEST_CASE(
   }
   CHECK(sc.solver.motions_on_device() == measured);
   CHECK(moving > measured / 2);
+}
+
+TEST_CASE("use_opencl: the Jacobi substep runs on the device from its prediction to its end",
+          "[opencl][jacobi]") {
+  // The contact-list tests' 512 grains falling onto the ground with contact_solver jacobi
+  // (pre-stabilization and friction on), 90 substeps, twice: predicted, pre-stabilized and
+  // ended on the host (host_finish), the device running the iterations alone; and the whole
+  // substep chained on the device (GrainsSolver::jacobi_on_device): its prediction, the
+  // pre-stabilization that moves the start and the prediction there, the iterations taking
+  // those there, and the end there, held (GrainsData::may_hold_end) and the next substep
+  // started from it, the host's positions and velocities NaN in between. The velocity update
+  // is the same arithmetic on both sides (no blend nor cap acts here: kernels/velocity.h), so
+  // every fifth held end, brought back, is the host's run's, bit for bit, and so is the count
+  // of touching pairs every substep.
+  test::Scene host = test::layered_block(true), held;
+  host.s.contact_solver = kContactJacobi;
+  host.s.pre_stabilization = true;
+  held = host;
+  host.s.host_finish = true;
+  held.hold_end = true;
+  const size_t n = held.size();
+  const double grains = double(n), colliders = double(held.colliders.size());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  size_t checked = 0, stabilized = 0;
+  for (int k = 0; k < 90; ++k) {
+    INFO("substep " << k);
+    if (held.solver.end_held()) std::fill(held.P.begin(), held.P.end(), nan), held.v = held.P;
+    const opencl::Traffic held0 = held.solver.device_traffic(),
+                          host0 = host.solver.device_traffic();
+    held.substep();
+    host.substep();
+    const double held_sent = double(held.solver.device_traffic().sent - held0.sent);
+    const double host_sent = double(host.solver.device_traffic().sent - host0.sent);
+    REQUIRE(held.solver.finished_on_device());
+    REQUIRE(!host.solver.finished_on_device());
+    REQUIRE(held.solver.end_held());
+    stabilized += held.solver.stabilize_passes() > 0;
+    if (k % 5 == 4 || k == 89) {
+      const std::vector<float> P(held.solver.end_positions(), held.solver.end_positions() + 3 * n);
+      const std::vector<float> v(held.solver.end_velocities(),
+                                 held.solver.end_velocities() + 3 * n);
+      CHECK(P == host.P);
+      CHECK(v == host.v);
+      ++checked;
+    }
+    // (the mean: measured on the device, or on the host where the rows came back for the host's
+    // run; each pair's overlap over its summed radii, (r - |d|) / r with |d| < r, from a length
+    // whose squares either side may fuse differently, is within 2 eps of the other side's, and
+    // so is their mean, plus the roundings of the sum and the float it is written as)
+    CHECK(held.stats.contacts == host.stats.contacts);
+    CHECK(std::fabs(held.stats.max_penetration - host.stats.max_penetration) <= 2 * FLT_EPSILON);
+    CHECK(std::fabs(held.stats.mean_penetration - host.stats.mean_penetration) <= 4 * FLT_EPSILON);
+    // What goes up after the first substep: no position. The chain sends at most, a grain, the
+    // ids for a lookup of the contacts' slips (8 B), the planes' carried slips (12 B an entry),
+    // 136 B a collider, 12 for the force and 1 KiB of flags and sums; the host's run sends, a
+    // grain, the predicted positions for the search (12 B), the start and pre-stabilization's
+    // own copy of it (24), and the pre-stabilized start and the predicted positions it moved,
+    // for the iterations (24).
+    if (k > 0) {
+      const double planes = double(held.solver.collider_planes().offsets->back());
+      INFO("sent " << held_sent / grains << " B a grain, the host's run " << host_sent / grains);
+      CHECK(held_sent <= 8 * grains + 12 * planes + 136 * colliders + 12 + 1024);
+      CHECK(host_sent >= 60 * grains);
+    }
+  }
+  CHECK(checked == 18);
+  CHECK(stabilized >= 80);
+  CHECK(held.solver.held_ends() == 90);
+  CHECK(held.solver.held_starts() == 89);
+  // the device predicted every substep, the host none of them
+  CHECK(held.solver.host_predictions() == 0);
+  CHECK(host.solver.host_predictions() == 90);
 }

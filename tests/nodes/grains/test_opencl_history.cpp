@@ -1,4 +1,4 @@
-// The Jacobi path's contact history between grains kept on the OpenCL device
+// The Jacobi path's contact history kept on the OpenCL device
 // (kernels/history.h, opencl/history.cpp; docs/opencl.md, "What still crosses each substep").
 #include <catch2/catch.hpp>
 #include <numeric>
@@ -12,12 +12,12 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
           "[opencl][jacobi]") {
   // The 512 falling grains with ids, contact_solver jacobi (friction and pre-stabilization on),
   // 120 substeps, twice: the contacts' slips saved and carried on the host (host_history), and
-  // on the device where its search's rows are. The rows are rebuilt through the fall (each
-  // contact's slip looked up by the grains' ids in the last substep's rows) and kept once the
-  // grains lie on the ground (each slip where it was saved); at the 40th substep the grains come
-  // in another order, at the 80th 13 are killed and 13 born in the air, and at the 60th the
-  // device's run saves its state and reads it back (the saved slips come back for it). Both
-  // write the same floats (kernels/history.h: no multiply and add fused on either side): the
+  // on the device where its search's rows are (the ground's saved there too). The rows are rebuilt
+  // through the fall (each contact's slip looked up by the grains' ids in the last substep's rows)
+  // and kept once the grains lie on the ground (each slip where it was saved); at the 40th substep
+  // the grains come in another order, at the 80th 13 are killed and 13 born in the air, and at the
+  // 60th the device's run saves its state and reads it back (the saved slips come back for it).
+  // Both write the same floats (kernels/history.h: no multiply and add fused on either side): the
   // two runs end every substep with the same positions and velocities, bit for bit.
   // With update_neighbors_during_iterations the rows are found again during the iterations,
   // and the device's carried slips and pair sums come back for the host to carry over.
@@ -67,6 +67,12 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
     INFO(saved << " histories saved on the device, " << looked_up << " looked up there");
     CHECK(host.solver.histories_saved_on_device() == 0);
     CHECK(host.solver.histories_looked_up_on_device() == 0);
+    // the ground's slips (gr_save_plane_slips) saved there where the iterations' end stays there
+    // (every substep's, one call of the iterations), else on the host (the rows rebuilt during
+    // the iterations: a call a pass)
+    const size_t planes = there.solver.plane_histories_saved_on_device();
+    CHECK(host.solver.plane_histories_saved_on_device() == 0);
+    CHECK(planes == (rebuild ? 0 : 120));
     if (rebuild) {  // every substep's rows found again: every history saved, then looked up
       CHECK(saved >= 110);
       CHECK(looked_up >= 100);

@@ -652,7 +652,8 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
 
   // pre-stabilization (gr_stabilize): the overlaps present at the start of the substep are
   // removed from the start and predicted positions alike, without velocity
-  if (s.pre_stabilization && s.contact_solver != kContactGaussSeidel &&
+  // (no iterations: no pass, nothing moved)
+  if (s.pre_stabilization && s.contact_solver != kContactGaussSeidel && c.iterations > 0 &&
       ((c.pairs_on && s.internal_collisions_weight > 0) || c.colliders_on)) {
     pre_stabilize(g, prm, s.internal_collisions_weight > 0, c.iterations, c.threads,
                   s.use_opencl ? &c : nullptr);
@@ -889,10 +890,22 @@ void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
   }
 }
 
+// the settings under which a Jacobi substep's stages chain on the device (jacobi_on_device: no
+// Chebyshev step, no rebuild during the iterations, no history made here, none of the test
+// switches that keep a stage here); the substep's grains decide the rest
+static bool jacobi_chain(const GrainsSettings& s) {
+  return s.contact_solver != kContactGaussSeidel &&
+         !(s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY) &&
+         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
+         !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
+}
+
+// gauss_seidel's, and jacobi's where its substep chains on the device (jacobi_chain: its end
+// there, which the test's end follows there)
 bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                                     size_t collider_count) {
-  if (!s.use_opencl || s.contact_solver != kContactGaussSeidel || s.host_finish ||
-      s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
+  if (!s.use_opencl || (s.contact_solver != kContactGaussSeidel && !jacobi_chain(s)) ||
+      s.host_finish || s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
     return false;
   opencl::Iterations& device = open_device();
   return device.builds_contacts() && device.sleeps_there();
@@ -988,14 +1001,9 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
 // host's search of rows, host_p) brings it then.
 bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
                                const ColliderState* colliders, size_t collider_count) const {
-  // jacobi's: where its chain runs there (jacobi_on_device, as far as the settings tell: the
-  // shapes need primitives, the impact data keep the end here)
-  const bool jacobi_chain =
-      s.contact_solver != kContactGaussSeidel &&
-      !(s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY) &&
-      !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
-      !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
-  return s.use_opencl && (s.contact_solver == kContactGaussSeidel || jacobi_chain) &&
+  // jacobi's: where its chain runs there (jacobi_chain; the shapes need primitives, the impact
+  // data keep the end here)
+  return s.use_opencl && (s.contact_solver == kContactGaussSeidel || jacobi_chain(s)) &&
          !s.resend_start && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
          !any_mesh(colliders, collider_count);
 }
@@ -1354,12 +1362,8 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 // positions here), no contact history made here (host_history), and none of the test switches
 // send_history_p, host_predict and host_finish.
 bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
-  const GrainsSettings& s = c.s;
-  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on &&
-         !(s.chebyshev_rho > 0 && c.iterations > GR_CHEBYSHEV_DELAY) &&
-         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
-         !(c.d.impact_impulse && c.colliders_on) && !s.host_history && !s.send_history_p &&
-         !s.host_predict && !s.host_finish;
+  return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_on &&
+         !(c.d.impact_impulse && c.colliders_on);
 }
 
 // The substep's end made on the device after its iterations (write_back takes what it wrote):

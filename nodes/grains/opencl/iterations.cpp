@@ -535,8 +535,7 @@ bool Iterations::stabilize(const gr_grains& g, const gr_params& prm, const Itera
                            bool there) {
   Impl& m = *impl_;
   const size_t n = size.n;
-  if (there && !(m.p_taken && m.p_taken_n == n)) return false;
-  if (n == 0 || most <= 0) return true;
+  if (n == 0 || most <= 0 || (there && !(m.p_taken && m.p_taken_n == n))) return !there;
   const size_t f = sizeof(float);
   constexpr size_t kParts = 16 * kGroup;  // gr_k_largest's work-items
   if (!m.stabilize_grains) {

@@ -21,6 +21,7 @@ struct BinScene {
   const char* probe = nullptr;
   const char* probed = "probe";
   bool error_control = true;
+  bool jacobi = false;  // contact_solver jacobi (else the default gauss_seidel)
   int frames = 8;
   const char* file = "bin.json";  // the graph's name, under tests/
 };
@@ -62,6 +63,7 @@ inline Graph bin_graph(const BinScene& b) {
   json grains = {
       {"particle_separation", 0.02}, {"use_opencl", true}, {"friction_with_particles", 1}};
   if (!b.sleeping) grains["sleep_speed"] = 0;
+  if (b.jacobi) grains["contact_solver"] = "jacobi";
   nodes.push_back(
       {{"name", "grains"}, {"type", "grains"}, {"inputs", {"gravity"}}, {"params", grains}});
   std::string last = "grains";

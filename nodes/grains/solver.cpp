@@ -2061,17 +2061,24 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   } else {
     hist_plane_offsets_.assign(n + 1, 0);
   }
-  // the iterations' end and the pre-stabilized start, where the host makes a part of the history
-  // the device's end left there
-  if (finished_there_ && p == p_.data() && ((pairs && !pairs_there) || (planes && !planes_there)) &&
-      !device_.device->fetch_run(p_.data(), stable_there_ ? P_stable_.data() : nullptr, n))
-    throw std::logic_error("grains: the device no longer holds the iterations' end");
+  // where the host makes a part of the history that the device's end left there: the
+  // iterations' end, and the start they read where it is the device's alone (pre-stabilized
+  // there, or held there: d.P and P0_ may be the end here now), into P_stable_
+  gr_grains gp = g;
+  if (finished_there_ && p == p_.data() && ((pairs && !pairs_there) || (planes && !planes_there))) {
+    const bool start_there = stable_there_ || start_held_;
+    if (start_there) P_stable_.resize(3 * n + 1);
+    if (!device_.device->fetch_run(p_.data(), start_there ? P_stable_.data() : nullptr, n))
+      throw std::logic_error("grains: the device no longer holds the iterations' end");
+    if (start_there) gh.P = gp.P = P_stable_.data();
+  }
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     if (pairs && !pairs_there)
       save_pair_slips(gh, prm, p, pair_normal_.data(), i, hist_slip_.data());
     if (!planes) continue;
-    if (!planes_there) save_plane_slips(g, prm, p, collider_normal_.data(), i, plane_saved_.data());
+    if (!planes_there)
+      save_plane_slips(gp, prm, p, collider_normal_.data(), i, plane_saved_.data());
     uint32_t m = hist_plane_offsets_[i];
     for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
       if (!(collider_normal_[e] > 0.0f)) continue;

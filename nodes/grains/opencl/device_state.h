@@ -396,7 +396,7 @@ struct Iterations::Impl {
     return true;
   }
   // `bytes` of b from byte `offset` on into host memory (waits for them)
-  void download(Buffer& b, void* host, size_t bytes, size_t offset = 0) {
+  void download(const Buffer& b, void* host, size_t bytes, size_t offset = 0) {
     if (!host || bytes == 0) return;
     check(clEnqueueReadBuffer(queue, b.mem, CL_TRUE, offset, bytes, host, 0, nullptr, nullptr),
           "clEnqueueReadBuffer");

@@ -598,8 +598,8 @@ bool Iterations::stabilize(const gr_grains& g, const gr_params& prm, const Itera
 
 bool Iterations::fetch_run(float* p, float* start, size_t n) {
   Impl& m = *impl_;
-  if (!m.run_out || m.run_out_n != n || (start && m.start_kept != n)) return false;
-  m.download(*const_cast<Buffer*>(m.run_out), p, 3 * n * sizeof(float));
+  if (!m.run_out || m.run_out_n != n) return false;
+  m.download(*m.run_out, p, 3 * n * sizeof(float));
   if (start) m.download(m.arrays[kP], start, 3 * n * sizeof(float));
   return true;
 }

@@ -268,8 +268,8 @@ class Iterations {
   bool sleep_rows(const float* P, const float* radius, const uint8_t* fast, size_t n, uint32_t* out,
                   const std::vector<gr_uint>* written_there = nullptr);
 
-  // the positions the last run() ended with (n x 3) into p and, where stabilize() kept the start
-  // there this substep, that start (g.P's buffer) into start (null: not wanted); false where the
+  // the positions the last run() ended with (n x 3) into p and the start it read (g.P's
+  // buffer: stabilize()'s where it kept it there) into start (null: not wanted); false where the
   // device holds no such run of n grains (nothing written then)
   bool fetch_run(float* p, float* start, size_t n);
 

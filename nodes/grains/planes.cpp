@@ -27,7 +27,7 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   // use_opencl: analytic colliders' planes are found on the device (a mesh's distance is the
   // host's alone)
   if (device && !any_mesh(colliders, collider_count)) {
-    const bool stay = device->entries_stay && open_device().builds_contacts();
+    const bool stay = device->entries_stay;
     const bool rows_stay = stay && device->rows_stay;
     open_device().find_planes(shapes.data(), collider_count, o, query_scale, P, p, radius,
                               inv_mass_.data(), n, device->p_there, device->radius_there, stay,

@@ -453,6 +453,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(const DeviceSlot& 
   holds_contacts = stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
   hist_stale = slips_stale = slips_there = sums_there = sums_stale = friction_there = false;
+  hist_planes_stale = plane_slips_stale = false;
   loaded = 0;
   owner = nullptr;
   return *this;
@@ -472,6 +473,7 @@ GrainsSolver::DeviceSlot& GrainsSolver::DeviceSlot::operator=(DeviceSlot&& o) {
   stale = rows_stale = planes_stale = plane_rows_stale = rows_p_stale = false;
   end_there = end_P_stale = end_v_stale = false;
   hist_stale = slips_stale = slips_there = sums_there = sums_stale = friction_there = false;
+  hist_planes_stale = plane_slips_stale = false;
   loaded = 0;
   owner = nullptr;
   o.holds_contacts = false;
@@ -517,10 +519,47 @@ void GrainsSolver::sync_rows() const {
 }
 
 void GrainsSolver::sync_history() const {
+  sync_pair_history();
+  sync_plane_history();
+}
+
+void GrainsSolver::sync_pair_history() const {
   if (!device_.hist_stale) return;
   GrainsSolver& self = const_cast<GrainsSolver&>(*this);
   self.device_.device->fetch_pair_history(self.hist_slip_.data(), &self.hist_rows_);
   self.device_.hist_stale = false;
+}
+
+void GrainsSolver::sync_plane_history() const {
+  if (!device_.hist_planes_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  // the device kept an entry a plane; the host keeps the planes that pushed (save_history)
+  std::vector<uint32_t> offsets;
+  std::vector<int32_t> which;
+  std::vector<float> normal, slip;
+  self.device_.device->fetch_plane_history(&offsets, &which, &normal, &slip);
+  self.device_.hist_planes_stale = false;
+  const size_t n = offsets.size() - 1;
+  self.hist_plane_offsets_.assign(n + 1, 0);
+  self.hist_plane_collider_.clear();
+  self.hist_plane_slip_.clear();
+  for (size_t i = 0; i < n; ++i) {
+    for (uint32_t e = offsets[i]; e < offsets[i + 1]; ++e) {
+      if (!(normal[e] > 0.0f)) continue;
+      self.hist_plane_collider_.push_back(which[e]);
+      self.hist_plane_slip_.insert(self.hist_plane_slip_.end(), &slip[3 * size_t(e)],
+                                   &slip[3 * size_t(e)] + 3);
+    }
+    self.hist_plane_offsets_[i + 1] = static_cast<uint32_t>(self.hist_plane_collider_.size());
+  }
+}
+
+void GrainsSolver::sync_plane_slips() const {
+  if (!device_.plane_slips_stale) return;
+  GrainsSolver& self = const_cast<GrainsSolver&>(*this);
+  self.device_.device->fetch_plane_slips(self.plane_slip_.data(), self.collider_normal_.data(),
+                                         collider_normal_.size());
+  self.device_.plane_slips_stale = false;
 }
 
 void GrainsSolver::sync_slips() const {
@@ -582,6 +621,7 @@ void GrainsSolver::sync_device() const {
   sync_rows();
   sync_history();
   sync_slips();
+  sync_plane_slips();
   sync_sums();
   sync_rows_p();
   sync_planes();
@@ -593,7 +633,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   if (stats) *stats = GrainsStats{};
   candidates_on_ = false;
   p_on_device_ = planes_on_device_ = predicted_there_ = searched_there_ = p_made_ = false;
-  plane_rows_there_ = planes_same_ = false;
+  plane_rows_there_ = planes_same_ = planes_kept_there_ = false;
   written_on_device_ = nullptr;
   finished_there_ = collided_there_ = carried_ = carried_from_ = end_stays_ = false;
   stable_there_ = stabilized_ = false;
@@ -601,6 +641,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   device_.owner = this;
   // the last substep's carried slips and pair sums are done with (its saved slips stay)
   device_.slips_stale = device_.slips_there = device_.sums_there = device_.sums_stale = false;
+  device_.plane_slips_stale = false;
   device_.friction_there = device_.p_there = false;
   slept_there_ = sleep_there_;
   sleep_there_ = sleep_changed_ = force_there_ = false;
@@ -679,7 +720,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
     save_history(d, s, g, prm, p_.data(), c.pair_friction_pass, c.collider_friction_pass, c.threads,
                  s.use_opencl && !s.host_history ? &c : nullptr);
   else
-    hist_id_.clear(), hist_slip_.clear(), device_.hist_stale = false;
+    hist_id_.clear(), hist_slip_.clear(), device_.hist_stale = device_.hist_planes_stale = false;
 
   // 5. strain, breaking, strands
   if (c.constraints_on) update_constraints(d, s, c.threads, stats);
@@ -1280,7 +1321,10 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   DevicePlanes device;
   device.p_there = first && p_on_device_;
   device.radius_there = first && searched_there_ && rows_true_radius_;
-  device.entries_stay = c.s.contact_solver == kContactGaussSeidel && !c.impacts && !c.shapes_on;
+  device.entries_stay =
+      c.s.contact_solver == kContactGaussSeidel
+          ? !c.impacts && !c.shapes_on && (!c.s.use_opencl || open_device().builds_contacts())
+          : jacobi_planes_stay(c);
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
   // the device's planes take the predicted positions there; the host's (a mesh collider's)
   // read them here
@@ -1290,6 +1334,8 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
               c.s.use_opencl ? &device : nullptr);
   // the device's planes took the predicted positions (the solve copies them there)
   if (first && planes_on_device_) p_on_device_ = true;
+  planes_kept_there_ =
+      planes_on_device_ && device.entries_stay && c.s.contact_solver != kContactGaussSeidel;
   g.plane_offsets = plane_offsets_.data();
   g.plane = plane_.data();
   if (friction) {
@@ -1347,11 +1393,25 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
   // during the iterations, or a save the device cannot make, brings them: sync_sums)
   opencl::IterationSizes size = device_sizes(c);
   size.sums_stay = !c.s.host_history;
+  // the collider sums stay there with the planes (sync_plane_slips brings them)
+  size.collider_sums_stay = whole && planes_kept_there_;
   open_device().run(gd, c.prm, size, x, c.acc, count, whole ? friction_pass : friction_after,
                     whole ? c.s.accurate_friction : false, w ? *w : opencl::JacobiSolve());
+  if (size.collider_sums_stay && c.acc.collider) device_.plane_slips_stale = true;
   if (gd.pair_slip) device_.slips_there = true;  // sent with it, or there already
   if (c.acc.pair && gd.nbr_offsets) device_.sums_there = true, device_.sums_stale = size.sums_stay;
   if (c.acc.friction_dx) device_.friction_there = true;
+}
+
+bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
+  const GrainsSettings& s = c.s;
+  const bool chebyshev = s.chebyshev_rho > 0 && c.iterations > GR_CHEBYSHEV_DELAY;
+  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on && !chebyshev &&
+         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations;
+}
+
+bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
+  return jacobi_whole(c) && !c.impacts && !c.s.host_history;
 }
 
 // use_opencl with jacobi: the substep's prediction, pre-stabilization, iterations and end chained
@@ -1417,6 +1477,7 @@ opencl::IterationSizes GrainsSolver::device_sizes(const SubstepContext& c) const
   size.slips_there = device_.slips_there;
   size.sums_there = device_.sums_there;
   size.friction_there = device_.friction_there;
+  size.plane_slips_there = device_.plane_slips_stale;
   size.prims = c.g.con_offsets ? c.d.prim_count : 0;
   size.row_length = row_length_;
   return size;
@@ -1462,9 +1523,7 @@ void GrainsSolver::iterate(SubstepContext& c) {
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
   if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
-  const bool device_whole = device && !c.shapes_on && !chebyshev &&
-                            !s.update_neighbors_during_iterations &&
-                            !s.update_collisions_during_iterations;
+  const bool device_whole = jacobi_whole(c);
   // the Jacobi chain there (jacobi_on_device): the prediction the device holds, moved there by
   // pre-stabilization where it ran, and the substep's end there
   opencl::JacobiSolve w;
@@ -1931,6 +1990,7 @@ void GrainsSolver::load_state(StateReader& r) {
   seq_valid_ = false;
   device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
   device_.hist_stale = device_.slips_stale = device_.slips_there = false;
+  device_.hist_planes_stale = device_.plane_slips_stale = false;
   device_.sums_there = device_.sums_stale = device_.friction_there = false;
 }
 
@@ -1963,33 +2023,50 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
   const size_t entries = neighbors_.offsets.empty() ? 0 : neighbors_.offsets.back();
   // the rows are last substep's: each entry's slip is where it was saved
   const bool kept = pairs && same_rows && hist_slip_.size() == 3 * entries;
+  // last substep's grains by id (ids far sparser than the grains: no history); `same`, they
+  // are these grains in this order, each its own index there (the device then needs no ids)
+  int32_t top = -1;
+  const bool ids = history_ids(n, &top);
+  bool same = ids && hist_id_.size() == n;
+  for (size_t i = 0; i < n && same; ++i) same = hist_id_[i] == grain_id(d, i);
+  const size_t table = ids && !same ? size_t(top) + 1 : 0;
+  const int32_t* hist_ids = ids && !same ? hist_id_.data() : nullptr;
   // the slips the device saved: the carried ones made there too, where its search's rows are
   bool made_there = false;
   if (pairs && device_.hist_stale) {
-    int32_t top = -1;
-    const bool ids = !kept && history_ids(n, &top);
-    made_there = device && open_device().load_pair_history(
-                               device_sizes(*device), kept, d.id, ids ? hist_id_.data() : nullptr,
-                               hist_id_.size(), ids ? size_t(top) + 1 : 0);
+    made_there = device && open_device().load_pair_history(device_sizes(*device), kept, same, d.id,
+                                                           kept ? nullptr : hist_ids,
+                                                           hist_id_.size(), kept ? 0 : table);
     if (made_there) {
-      hist_lookups_device_ += ids;
+      hist_lookups_device_ += !kept && ids;
       pair_slip_.resize(3 * entries);
       device_.slips_stale = device_.slips_there = true;
     } else {
-      sync_history();
+      sync_pair_history();
     }
   }
   if (kept && !made_there)
     pair_slip_.swap(hist_slip_);
   else if (pairs && !made_there)
     pair_slip_.assign(3 * entries, 0.0f);
-  if (planes) plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+  // the planes' carried slips made there from the save kept there, where this substep's planes
+  // stay there too (jacobi_planes_stay)
+  bool planes_there = false;
+  if (planes) {
+    plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+    if (device_.hist_planes_stale && device && planes_kept_there_) {
+      planes_there = open_device().load_plane_history(device_sizes(*device), same, d.id, hist_ids,
+                                                      hist_id_.size(), table);
+      hist_plane_loaded_device_ += planes_there;
+      device_.plane_slips_stale = planes_there;
+    }
+    if (!planes_there) sync_plane_history();
+  }
   const bool lookup_pairs = pairs && !kept && !made_there && !hist_slip_.empty();
-  if (hist_id_.empty() || (!lookup_pairs && !planes)) return;
-  if (lookup_pairs) sync_rows();  // the host looks each entry up in its row
-  // last substep's grains by id (ids far sparser than the grains: no history)
-  int32_t top = -1;
-  if (!history_ids(n, &top)) return;
+  const bool lookup_planes = planes && !planes_there;
+  if (hist_id_.empty() || (!lookup_pairs && !lookup_planes) || !ids) return;
+  if (lookup_pairs) sync_rows();     // the host looks each entry up in its row
+  if (lookup_planes) sync_planes();  // ... and each plane in its grain's planes
   hist_lookup_.assign(size_t(top) + 1, -1);
   for (size_t i = 0; i < hist_id_.size(); ++i) hist_lookup_[hist_id_[i]] = static_cast<int32_t>(i);
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -2001,20 +2078,16 @@ void GrainsSolver::load_history(const GrainsData& d, bool pairs, bool planes, bo
                          static_cast<int>(i), h, hist_rows_.offsets.data(),
                          hist_rows_.indices.data(), hist_id_.data(), hist_slip_.data(),
                          pair_slip_.data());
-    if (planes)
-      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e)
-        for (uint32_t m = hist_plane_offsets_[h]; m < hist_plane_offsets_[h + 1]; ++m)
-          if (hist_plane_collider_[m] == plane_collider_[e]) {
-            std::copy_n(&hist_plane_slip_[3 * m], 3, &plane_slip_[3 * size_t(e)]);
-            break;
-          }
+    if (lookup_planes)  // the history here holds the planes that pushed alone
+      gr_load_plane_slips(plane_offsets_.data(), plane_collider_.data(), static_cast<int>(i), h,
+                          hist_plane_offsets_.data(), hist_plane_collider_.data(), nullptr,
+                          hist_plane_slip_.data(), plane_slip_.data());
   }
 }
 
 void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, const gr_grains& g,
                                 const gr_params& prm, const float* p, bool pairs, bool planes,
                                 int threads, const SubstepContext* device) {
-  if (planes) sync_planes();
   const size_t n = d.n;
   const long ln = static_cast<long>(n);
   // the iterations' end where the device holds it (device_passes), which it then reads there
@@ -2038,10 +2111,20 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
     sync_slips(), sync_sums(), sync_rows();
     gh.nbr_indices = neighbors_.indices.data();
   }
-  // the planes' slips, an entry each (plane_saved_), then those of the planes that pushed; made
-  // on the device where the iterations' end is there
-  bool planes_there = false;
-  if (planes) {
+  // the planes' slips, an entry each: kept on the device with the planes they belong to where
+  // those stay there (jacobi_planes_stay; hist_plane_*_ are then the device's until
+  // sync_history) and it holds the iterations' end (or the pairs' save sent it), else into
+  // plane_saved_, made on the device where the iterations' end is there, then those of the
+  // planes that pushed
+  bool planes_there = false, planes_kept = false;
+  if (planes && device && (p_there || pairs_there) && planes_kept_there_)
+    planes_kept = open_device().save_plane_history(g, prm, device_sizes(*device),
+                                                   collider_normal_.data(), nullptr);
+  device_.hist_planes_stale = planes_kept;
+  hist_plane_saved_device_ += planes_kept;
+  if (planes && !planes_kept) {
+    sync_planes();
+    sync_plane_slips();
     plane_saved_.resize(3 * size_t(plane_offsets_[n]));
     planes_there = device && p_there &&
                    open_device().save_plane_history(g, prm, device_sizes(*device),
@@ -2058,14 +2141,15 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
     for (size_t i = 0; i < n; ++i) hist_plane_offsets_[i + 1] += hist_plane_offsets_[i];
     hist_plane_collider_.resize(hist_plane_offsets_[n]);
     hist_plane_slip_.resize(3 * size_t(hist_plane_offsets_[n]));
-  } else {
+  } else if (!planes) {
     hist_plane_offsets_.assign(n + 1, 0);
   }
   // where the host makes a part of the history that the device's end left there: the
   // iterations' end, and the start they read where it is the device's alone (pre-stabilized
   // there, or held there: d.P and P0_ may be the end here now), into P_stable_
   gr_grains gp = g;
-  if (finished_there_ && p == p_.data() && ((pairs && !pairs_there) || (planes && !planes_there))) {
+  const bool planes_here = planes && !planes_kept && !planes_there;
+  if (finished_there_ && p == p_.data() && ((pairs && !pairs_there) || planes_here)) {
     const bool start_there = stable_there_ || start_held_;
     if (start_there) P_stable_.resize(3 * n + 1);
     if (!device_.device->fetch_run(p_.data(), start_there ? P_stable_.data() : nullptr, n))
@@ -2076,7 +2160,7 @@ void GrainsSolver::save_history(const GrainsData& d, const GrainsSettings& s, co
   for (long i = 0; i < ln; ++i) {
     if (pairs && !pairs_there)
       save_pair_slips(gh, prm, p, pair_normal_.data(), i, hist_slip_.data());
-    if (!planes) continue;
+    if (!planes || planes_kept) continue;
     if (!planes_there)
       save_plane_slips(gp, prm, p, collider_normal_.data(), i, plane_saved_.data());
     uint32_t m = hist_plane_offsets_[i];

@@ -87,9 +87,9 @@ struct GrainsSettings {
   // even where the device makes the same floats (GrainsSolver::predict; the tests compare the
   // two)
   bool host_predict = false;
-  // use_opencl with gauss_seidel: the collider planes' rows and colliders come back every
-  // substep, even where the device compares them with the contact list's (the tests compare the
-  // two)
+  // use_opencl: the collider planes' rows and colliders come back every substep, even where the
+  // device compares them with the contact list's (gauss_seidel) or the Jacobi path keeps them
+  // there (jacobi_planes_stay; the tests compare the two)
   bool fetch_plane_rows = false;
   // use_opencl with jacobi: the contacts' slips are saved and carried on the host, even where the
   // device could where its search's rows are (GrainsSolver::save_history; the tests compare the
@@ -223,8 +223,13 @@ class GrainsSolver {
   // those whose carried slips it looked up by id there (rather than finding them in place)
   size_t histories_saved_on_device() const { return hist_saved_device_; }
   size_t histories_looked_up_on_device() const { return hist_lookups_device_; }
-  // ... and those whose collider planes' slips it saved
+  // ... and those whose collider planes' slips it saved, and those whose planes' carried slips
+  // it made there from a save it kept (jacobi_planes_stay)
   size_t plane_histories_saved_on_device() const { return hist_plane_saved_device_; }
+  size_t plane_histories_loaded_on_device() const { return hist_plane_loaded_device_; }
+  // the last substep's number of collider plane entries (0 without colliders), where they are:
+  // it brings no plane from the device
+  size_t plane_entries() const { return plane_offsets_.size() > n_ ? plane_offsets_[n_] : 0; }
   const std::vector<gr_seq_contact>& contact_list() const {
     sync_contacts();
     return seq_;
@@ -346,7 +351,7 @@ class GrainsSolver {
   // the OpenCL device when every collider is analytic; p_there: p is the positions the device's
   // search took, radius_there: radius_ its radii
   // entries_stay: the host reads no entry this substep but through sync_planes (a gauss_seidel
-  // list the device builds, no impact data, no rigid shapes)
+  // list the device builds, no impact data, no rigid shapes; or jacobi_planes_stay)
   struct DevicePlanes {
     bool p_there = false, radius_there = false, entries_stay = false, rows_stay = false;
   };
@@ -442,6 +447,10 @@ class GrainsSolver {
     // the device saved; pair_slip_ is the carried slips it made; slips_there: the device holds
     // pair_slip_ (it made them, or a call of this substep sent them)
     bool hist_stale = false, slips_stale = false, slips_there = false;
+    // ... and of the collider planes (jacobi_planes_stay): hist_planes_stale, the device kept
+    // the last save (hist_plane_offsets_, hist_plane_collider_ and hist_plane_slip_ are older);
+    // plane_slips_stale, it made plane_slip_ and holds collider_normal_, the host's older
+    bool hist_planes_stale = false, plane_slips_stale = false;
     // the Jacobi path's pair sums (pair_normal_): sums_there, the device holds them from the
     // substep's last call; sums_stale, the host's are older (they stayed there)
     bool sums_there = false, sums_stale = false;
@@ -554,12 +563,18 @@ class GrainsSolver {
   // there), where the device compared them with those of the list, kept there when it was
   // built (seq_planes_there_): planes_same_ says whether they are the same
   bool planes_on_device_ = false, plane_rows_there_ = false, planes_same_ = false;
+  // ... and they stay there for the Jacobi path's history and passes (jacobi_planes_stay)
+  bool planes_kept_there_ = false;
   // neighbors_'s offsets and indices from the device (DeviceSlot::rows_stale), plane_'s entries
   // (DeviceSlot::planes_stale), the planes' rows and colliders (DeviceSlot::plane_rows_stale),
   // and all of these with the contact list
   void sync_rows() const;
-  // hist_slip_ and pair_slip_ from the device (DeviceSlot::hist_stale, slips_stale)
+  // hist_slip_ and pair_slip_ from the device (DeviceSlot::hist_stale, slips_stale), and the
+  // planes' history (hist_planes_stale), carried slips and sums (plane_slips_stale)
   void sync_history() const;
+  void sync_pair_history() const;
+  void sync_plane_history() const;
+  void sync_plane_slips() const;
   void sync_slips() const;
   void sync_sums() const;  // pair_normal_ from the device (DeviceSlot::sums_stale)
   void sync_rows_p() const;
@@ -568,6 +583,12 @@ class GrainsSolver {
   void sync_device() const;
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;
+  // use_opencl with jacobi: the iterations are one device call, nothing between them here (no
+  // rigid shapes, no Chebyshev step, no rows or planes found again during them)
+  bool jacobi_whole(const SubstepContext& c) const;
+  // ... and this substep's collider planes may stay there: no stage here reads them (no impact
+  // data, the contact history made there)
+  bool jacobi_planes_stay(const SubstepContext& c) const;
   NeighborSearch search_;
   NeighborList neighbors_;
   // the rows' build: valid, for these grains (ids) and radii, from these predicted positions,
@@ -671,7 +692,7 @@ class GrainsSolver {
   // of each grain, a slip per entry of its neighbour rows (hist_rows_ holds those rows once
   // they are rebuilt), and per grain a row of (collider, slip)
   size_t hist_saved_device_ = 0, hist_lookups_device_ = 0;  // histories_saved_on_device() ...
-  size_t hist_plane_saved_device_ = 0;
+  size_t hist_plane_saved_device_ = 0, hist_plane_loaded_device_ = 0;
   std::vector<float> plane_saved_;  // (plane entries x 3) m: each entry's slip, before the cut
   std::vector<int32_t> hist_id_;
   std::vector<int32_t> hist_lookup_;  // id -> index into hist_id_ (-1: none), ids >= 0

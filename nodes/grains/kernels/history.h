@@ -1,6 +1,7 @@
 /* The Jacobi path's contact history (GrainsSolver::save_history and load_history), grain by
  * grain: the host runs these functions through nodes/grains/history.cpp, a device through
- * opencl/grains.cl (gr_k_save_pair_slips, gr_k_load_pair_slips, gr_k_save_plane_slips), and both
+ * opencl/grains.cl (gr_k_save_pair_slips, gr_k_load_pair_slips, gr_k_save_plane_slips,
+ * gr_k_load_plane_slips), and both
  * write the same floats: every product and sum is written out without a multiply and an add
  * fused (the device's FP_CONTRACT off here, the host's file compiled with -ffp-contract=off) and
  * without OpenCL's dot(), whose order a device chooses.
@@ -105,6 +106,30 @@ GR_INLINE void gr_load_pair_slips(const GR_GLOBAL gr_uint* offsets,
         }
       }
     gr_store3(slip, (int)k, s);
+  }
+}
+
+/* Grain i's carried collider-plane slips into slip (3 floats an entry of its row of planes,
+ * offsets and which, each entry's collider): for each entry, the slip the last substep saved for
+ * the same collider in that substep's row of the grain (h: its index there, below 0 for none;
+ * hist_offsets and hist_which that substep's rows and colliders, hist_slip what it saved), among
+ * the entries that pushed there (hist_normal, their summed normal corrections, above 0; null:
+ * every entry, a history kept of those alone); 0 where there is none. */
+GR_INLINE void gr_load_plane_slips(const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL int* which,
+                                   int i, int h, const GR_GLOBAL gr_uint* hist_offsets,
+                                   const GR_GLOBAL int* hist_which,
+                                   const GR_GLOBAL float* hist_normal,
+                                   const GR_GLOBAL float* hist_slip, GR_GLOBAL float* slip) {
+  gr_uint e, m;
+  for (e = offsets[i]; e < offsets[i + 1]; ++e) {
+    gr_float3 s = gr_make3(0.0f, 0.0f, 0.0f);
+    if (h >= 0)
+      for (m = hist_offsets[h]; m < hist_offsets[h + 1]; ++m)
+        if (hist_which[m] == which[e] && (!hist_normal || hist_normal[m] > 0.0f)) {
+          s = gr_load3(hist_slip, (int)m);
+          break;
+        }
+    gr_store3(slip, (int)e, s);
   }
 }
 

@@ -167,13 +167,20 @@ struct Iterations::Impl {
   // the Jacobi path's contact history (history.cpp, kernels/history.h): the kernels, the slips
   // the last save wrote (hist_entries of them, of hist_grains grains) with the rows they belong
   // to, the last substep's ids and each id's index there
-  cl_kernel save_pair_slips = nullptr, history_table = nullptr, load_pair_slips = nullptr;
+  cl_kernel save_pair_slips = nullptr, history_table_kernel = nullptr, load_pair_slips = nullptr;
   Buffer hist_slip, hist_offsets, hist_indices, hist_id, hist_table;
-  // the collider planes' saved slips (save_plane_history), which come back
-  cl_kernel save_plane_slips = nullptr;
-  Buffer plane_saved;
   size_t hist_entries = 0, hist_grains = 0;
   bool hist_saved = false;  // hist_slip and its rows hold the last save's
+  // hist_table holds this substep's ids' indices in the last substep (history_table())
+  bool table_made = false;
+  // the collider planes' saved slips (save_plane_history: an entry each, brought back, or kept
+  // with the planes' rows, colliders and summed normal corrections they belong to, of
+  // hist_plane_grains grains and hist_plane_entries entries) and the kernel that carries them
+  // into the next substep's planes (load_plane_history)
+  cl_kernel save_plane_slips = nullptr, load_plane_slips = nullptr;
+  Buffer plane_saved, hist_plane_offsets, hist_plane_which, hist_plane_sum;
+  size_t hist_plane_entries = 0, hist_plane_grains = 0;
+  bool hist_planes_saved = false;
   // what the save and the load send, staged (held: a write reads them late, and the host
   // rewrites its arrays before the next call): the positions, the pair sums, the saved ids
   std::vector<float> hist_p_host;
@@ -270,7 +277,8 @@ struct Iterations::Impl {
                       &seq_old, &seq_offsets, &seq_table_slots, &seq_block_start, &seq_links_bits,
                       &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
                       &wave_ends, &block_waves, &hist_slip, &hist_offsets, &hist_indices,
-                      &hist_id, &hist_table, &plane_saved, &shifted})
+                      &hist_id, &hist_table, &plane_saved, &hist_plane_offsets,
+                      &hist_plane_which, &hist_plane_sum, &shifted})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -294,8 +302,9 @@ struct Iterations::Impl {
                         row_overlaps, row_reach, sleep_rows, plane_count, plane_fill,
                         finish, scatter3, final_collision, carry, predict, plane_same,
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
-                        sleep_carry, motion, save_pair_slips, history_table,
-                        load_pair_slips, row_longest, save_plane_slips, shift})
+                        sleep_carry, motion, save_pair_slips, history_table_kernel,
+                        load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
+                        shift})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -419,6 +428,10 @@ struct Iterations::Impl {
   void set_pins(const gr_grains& g, const gr_params& prm, size_t n);
   void project_pins(Buffer* x, size_t global);
   // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
+  // hist_table: each id of the n grains now (id, null: their indices) at its grain's index in
+  // the last substep's hist_n (hist_id, below table_size), once a substep (table_made)
+  void history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,
+                     size_t table_size);
   void upload_contacts(const SequentialContacts& s);
   // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
   // once past their count

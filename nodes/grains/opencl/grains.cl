@@ -439,7 +439,8 @@ __kernel void gr_k_history_table(__global const int* hist_id, int n, __global in
 }
 
 /* grain i's carried slips, looked up by id in the last substep's rows (gr_load_pair_slips): its
- * index there from table (table_size ids) */
+ * index there from table (table_size ids; table null: the same grains in the same order, its
+ * own, id and hist_id null) */
 __kernel void gr_k_load_pair_slips(__global const gr_uint* offsets, __global const gr_uint* indices,
                                    __global const int* id, __global const int* table,
                                    int table_size, __global const gr_uint* hist_offsets,
@@ -450,9 +451,27 @@ __kernel void gr_k_load_pair_slips(__global const gr_uint* offsets, __global con
   int me, h;
   if (i >= n) return;
   me = id ? id[i] : i;
-  h = me >= 0 && me < table_size ? table[me] : -1;
+  h = !table ? i : me >= 0 && me < table_size ? table[me] : -1;
   gr_load_pair_slips(offsets, indices, id, i, h, hist_offsets, hist_indices, hist_id, hist_slip,
                      slip);
+}
+
+/* grain i's carried collider-plane slips, looked up in the last substep's rows of planes
+ * (gr_load_plane_slips): its index there from table (table_size ids; table null: the same
+ * grains in the same order, its own) */
+__kernel void gr_k_load_plane_slips(__global const gr_uint* offsets, __global const int* which,
+                                    __global const int* id, __global const int* table,
+                                    int table_size, __global const gr_uint* hist_offsets,
+                                    __global const int* hist_which,
+                                    __global const float* hist_normal,
+                                    __global const float* hist_slip, __global float* slip, int n) {
+  const int i = (int)get_global_id(0);
+  int me, h;
+  if (i >= n) return;
+  me = id ? id[i] : i;
+  h = !table ? i : me >= 0 && me < table_size ? table[me] : -1;
+  gr_load_plane_slips(offsets, which, i, h, hist_offsets, hist_which, hist_normal, hist_slip,
+                      slip);
 }
 
 /* work-item w of `items`: the largest of v[w], v[w + items], ... into part[w] (the host takes

@@ -3,6 +3,8 @@
 // substep's end stay here with the rows they belong to, and the next substep's carried slips are
 // made here from them, so that neither crosses (12 bytes a row entry each way).
 #include <cstdint>
+#include <utility>
+#include <vector>
 
 #include "nodes/grains/opencl/device_state.h"
 #include "nodes/grains/opencl/iterations.h"
@@ -41,6 +43,7 @@ bool Iterations::save_pair_history(const gr_grains& g, const gr_params& prm,
   } else {
     m.hist_p_host.assign(p, p + 3 * n);
     m.upload(m.p, m.hist_p_host.data(), 3 * n * f);
+    m.run_out = &m.p, m.run_out_n = n;  // the iterations' end, for the planes' save
   }
   m.hist_slip.reserve(m.ctx, 3 * entries * f, m.largest);
   HostArray bound[kArrays] = {};
@@ -75,29 +78,132 @@ bool Iterations::save_plane_history(const gr_grains& g, const gr_params& prm,
   Impl& m = *impl_;
   const size_t n = size.n, entries = size.plane_entries, f = sizeof(float);
   if (n == 0 || !g.plane_offsets || !m.run_out || m.run_out_n != n) return false;
-  if (entries == 0) return true;  // (nothing to save: the planes' slips may be unset)
-  if (!g.plane_slip) return false;
+  // kept: the planes' rows must be those the last find_planes() left there
+  if (!out && (!size.planes_there || m.plane_grains != n || m.plane_entries != entries))
+    return false;
+  if (entries == 0 && out) return true;  // (nothing to save: the planes' slips may be unset)
+  if (!g.plane_slip && entries > 0) return false;
   // the grains' arrays and the planes as run() bound them (no call has sent others since:
   // run_out_n), the sums as it brought them back
   HostArray a[kArrays];
   grain_arrays(g, size, a);
   HostArray bound[kArrays] = {};
   for (int k : {kP, kRadius, kFriction, kPlaneOffsets, kPlane, kPlaneSlip}) bound[k] = a[k];
-  m.upload_once(m.collider_sum, collider_normal, entries * f);
-  m.plane_saved.reserve(m.ctx, 3 * entries * f, m.largest);
-  cl_kernel k = m.kernel(m.save_plane_slips, "gr_k_save_plane_slips");
-  const int count = static_cast<int>(n);
-  m.set_grains(k, prm, g, bound);
-  set_buffer(k, kFirstOwn, m.run_out);
-  set_buffer(k, kFirstOwn + 1, &m.collider_sum);
-  set_buffer(k, kFirstOwn + 2, &m.plane_saved);
-  check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
-  m.launch(k, n);
-  m.download(m.plane_saved, out, 3 * entries * f);
+  if (entries > 0) {
+    m.upload_once(m.collider_sum, collider_normal, entries * f);
+    m.plane_saved.reserve(m.ctx, 3 * entries * f, m.largest);
+    cl_kernel k = m.kernel(m.save_plane_slips, "gr_k_save_plane_slips");
+    const int count = static_cast<int>(n);
+    m.set_grains(k, prm, g, bound);
+    set_buffer(k, kFirstOwn, m.run_out);
+    set_buffer(k, kFirstOwn + 1, &m.collider_sum);
+    set_buffer(k, kFirstOwn + 2, &m.plane_saved);
+    check(clSetKernelArg(k, kFirstOwn + 3, sizeof(int), &count), "clSetKernelArg");
+    m.launch(k, n);
+  }
+  if (out) {
+    m.download(m.plane_saved, out, 3 * entries * f);
+    return true;
+  }
+  // kept here with the rows, colliders and sums they belong to, which the next find_planes()
+  // and run() replace
+  const size_t u = sizeof(gr_uint);
+  m.hist_plane_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  m.hist_plane_which.reserve(m.ctx, entries * sizeof(int), m.largest);
+  m.hist_plane_sum.reserve(m.ctx, entries * f, m.largest);
+  const std::pair<const Buffer*, Buffer*> copies[] = {
+      {&m.arrays[kPlaneOffsets], &m.hist_plane_offsets},
+      {&m.plane_collider, &m.hist_plane_which},
+      {&m.collider_sum, &m.hist_plane_sum}};
+  const size_t bytes[] = {(n + 1) * u, entries * sizeof(int), entries * f};
+  for (int c = 0; c < (entries > 0 ? 3 : 1); ++c)
+    check(clEnqueueCopyBuffer(m.queue, copies[c].first->mem, copies[c].second->mem, 0, 0, bytes[c],
+                              0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+  m.hist_plane_entries = entries;
+  m.hist_plane_grains = n;
+  m.hist_planes_saved = true;
   return true;
 }
 
-bool Iterations::load_pair_history(const IterationSizes& size, bool kept, const int* id,
+bool Iterations::load_plane_history(const IterationSizes& size, bool same, const int* id,
+                                    const int* hist_id, size_t hist_n, size_t table_size) {
+  Impl& m = *impl_;
+  const size_t n = size.n, entries = size.plane_entries, f = sizeof(float);
+  if (!m.hist_planes_saved || n == 0 || !size.planes_there || m.plane_grains != n ||
+      m.plane_entries != entries || (same && m.hist_plane_grains != n))
+    return false;
+  Buffer& slip = m.arrays[kPlaneSlip];
+  slip.reserve(m.ctx, 3 * entries * f, m.largest);
+  m.forget(slip);
+  if (entries == 0) return true;
+  if (!same && (!hist_id || hist_n == 0 || table_size == 0 || m.hist_plane_grains != hist_n)) {
+    const float zero = 0.0f;
+    check(clEnqueueFillBuffer(m.queue, slip.mem, &zero, f, 0, 3 * entries * f, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    return true;
+  }
+  if (!same) m.history_table(n, id, hist_id, hist_n, table_size);
+  // offsets, which, id, table, table_size, hist_offsets, hist_which, hist_normal, hist_slip,
+  // slip, n
+  cl_kernel k = m.kernel(m.load_plane_slips, "gr_k_load_plane_slips");
+  const int table = same ? 0 : static_cast<int>(table_size), count = static_cast<int>(n);
+  set_buffer(k, 0, &m.arrays[kPlaneOffsets]);
+  set_buffer(k, 1, &m.plane_collider);
+  set_buffer(k, 2, !same && id ? &m.id : nullptr);
+  set_buffer(k, 3, same ? nullptr : &m.hist_table);
+  check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
+  set_buffer(k, 5, &m.hist_plane_offsets);
+  set_buffer(k, 6, &m.hist_plane_which);
+  set_buffer(k, 7, &m.hist_plane_sum);
+  set_buffer(k, 8, &m.plane_saved);
+  set_buffer(k, 9, &slip);
+  check(clSetKernelArg(k, 10, sizeof(int), &count), "clSetKernelArg");
+  m.launch(k, n);
+  return true;
+}
+
+void Iterations::fetch_plane_history(std::vector<uint32_t>* offsets, std::vector<int32_t>* which,
+                                     std::vector<float>* normal, std::vector<float>* slip) {
+  Impl& m = *impl_;
+  const size_t n = m.hist_plane_grains, entries = m.hist_plane_entries;
+  offsets->resize(n + 1);
+  which->resize(entries);
+  normal->resize(entries);
+  slip->resize(3 * entries);
+  m.download(m.hist_plane_offsets, offsets->data(), (n + 1) * sizeof(gr_uint));
+  m.download(m.hist_plane_which, which->data(), entries * sizeof(int));
+  m.download(m.hist_plane_sum, normal->data(), entries * sizeof(float));
+  m.download(m.plane_saved, slip->data(), 3 * entries * sizeof(float));
+}
+
+void Iterations::fetch_plane_slips(float* out, float* collider_normal, size_t entries) {
+  Impl& m = *impl_;
+  m.download(m.arrays[kPlaneSlip], out, 3 * entries * sizeof(float));
+  m.download(m.collider_sum, collider_normal, entries * sizeof(float));
+}
+
+void Iterations::Impl::history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,
+                                     size_t table_size) {
+  if (table_made) return;  // this substep's, for the pairs' lookup
+  const size_t i = sizeof(int);
+  upload_once(this->id, id, n * i);
+  hist_id_host.assign(hist_id, hist_id + hist_n);
+  upload(this->hist_id, hist_id_host.data(), hist_n * i);
+  hist_table.reserve(ctx, table_size * i, largest);
+  const int none = -1, olds = static_cast<int>(hist_n);
+  check(
+      clEnqueueFillBuffer(queue, hist_table.mem, &none, i, 0, table_size * i, 0, nullptr, nullptr),
+      "clEnqueueFillBuffer");
+  cl_kernel t = kernel(history_table_kernel, "gr_k_history_table");
+  set_buffer(t, 0, &this->hist_id);
+  check(clSetKernelArg(t, 1, sizeof(int), &olds), "clSetKernelArg");
+  set_buffer(t, 2, &hist_table);
+  launch(t, hist_n);
+  table_made = true;
+}
+
+bool Iterations::load_pair_history(const IterationSizes& size, bool kept, bool same, const int* id,
                                    const int* hist_id, size_t hist_n, size_t table_size) {
   Impl& m = *impl_;
   const size_t n = size.n, entries = size.pair_entries, f = sizeof(float);
@@ -115,40 +221,28 @@ bool Iterations::load_pair_history(const IterationSizes& size, bool kept, const 
     return true;
   }
   // new rows, where the search left them
-  if (!size.rows_there || !m.rows_found || m.rows_grains != n) return false;
+  if (!size.rows_there || !m.rows_found || m.rows_grains != n || (same && m.hist_grains != n))
+    return false;
   slip.reserve(m.ctx, 3 * entries * f, m.largest);
   m.forget(slip);
   if (entries == 0) return true;
-  if (!hist_id || hist_n == 0 || table_size == 0) {
+  if (!same && (!hist_id || hist_n == 0 || table_size == 0)) {
     const float zero = 0.0f;
     check(clEnqueueFillBuffer(m.queue, slip.mem, &zero, f, 0, 3 * entries * f, 0, nullptr, nullptr),
           "clEnqueueFillBuffer");
     return true;
   }
-  const size_t i = sizeof(int);
-  m.upload_once(m.id, id, n * i);
-  m.hist_id_host.assign(hist_id, hist_id + hist_n);
-  m.upload(m.hist_id, m.hist_id_host.data(), hist_n * i);
-  m.hist_table.reserve(m.ctx, table_size * i, m.largest);
-  const int none = -1, olds = static_cast<int>(hist_n), table = static_cast<int>(table_size),
-            count = static_cast<int>(n);
-  check(clEnqueueFillBuffer(m.queue, m.hist_table.mem, &none, i, 0, table_size * i, 0, nullptr,
-                            nullptr),
-        "clEnqueueFillBuffer");
-  cl_kernel t = m.kernel(m.history_table, "gr_k_history_table");
-  set_buffer(t, 0, &m.hist_id);
-  check(clSetKernelArg(t, 1, sizeof(int), &olds), "clSetKernelArg");
-  set_buffer(t, 2, &m.hist_table);
-  m.launch(t, hist_n);
+  if (!same) m.history_table(n, id, hist_id, hist_n, table_size);
+  const int table = same ? 0 : static_cast<int>(table_size), count = static_cast<int>(n);
   cl_kernel k = m.kernel(m.load_pair_slips, "gr_k_load_pair_slips");
   set_buffer(k, 0, &m.nb_offsets);
   set_buffer(k, 1, &m.nb_indices);
-  set_buffer(k, 2, id ? &m.id : nullptr);
-  set_buffer(k, 3, &m.hist_table);
+  set_buffer(k, 2, !same && id ? &m.id : nullptr);
+  set_buffer(k, 3, same ? nullptr : &m.hist_table);
   check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
   set_buffer(k, 5, &m.hist_offsets);
   set_buffer(k, 6, &m.hist_indices);
-  set_buffer(k, 7, &m.hist_id);
+  set_buffer(k, 7, same ? nullptr : &m.hist_id);
   set_buffer(k, 8, &m.hist_slip);
   set_buffer(k, 9, &slip);
   check(clSetKernelArg(k, 10, sizeof(int), &count), "clSetKernelArg");

@@ -106,6 +106,7 @@ void Iterations::begin_substep() {
   impl_->carry_from_n = 0;
   impl_->run_out_n = 0;
   impl_->start_kept = 0;
+  impl_->table_made = false;
 }
 
 bool Iterations::carry_start(const float* P, const float* v, size_t n, const float origin[3],
@@ -253,6 +254,7 @@ void Iterations::Impl::upload_grains(const gr_grains& g, const IterationSizes& s
           !(size.planes_there && (k == kPlaneOffsets || k == kPlane))))
       continue;
     if (k == kPairSlip && size.slips_there) continue;  // the device made them, or they went
+    if (k == kPlaneSlip && size.plane_slips_there) continue;  // the device made them
     if (rows_there && (k == kNbrOffsets || k == kNbrIndices)) {
       copy_once(arrays[k], k == kNbrOffsets ? nb_offsets : nb_indices, a[k].host, a[k].bytes);
       continue;
@@ -382,7 +384,7 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   if (!size.sums_stay) m.download(m.pair_sum, acc.pair, size.pair_entries * u);
   // (save_pair_history: the device's are the sums, whether or not they came back)
   if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
-  m.download(m.collider_sum, acc.collider, size.plane_entries * f);
+  if (!size.collider_sums_stay) m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   if (acc.collider) m.copied_once(m.collider_sum, acc.collider, size.plane_entries * f);
   m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
 }

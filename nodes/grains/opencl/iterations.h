@@ -53,6 +53,9 @@ struct IterationSizes {
   // the device holds the friction each grain received this substep (acc.friction_dx), from the
   // substep's last call: run() does not send it
   bool friction_there = false;
+  // the device holds g.plane_slip (load_plane_history made them): run() does not send them;
+  // collider_sums_stay: run() does not bring the collider sums (acc.collider) back
+  bool plane_slips_there = false, collider_sums_stay = false;
 };
 
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
@@ -219,11 +222,28 @@ class Iterations {
   // floats an entry of the planes' rows, brought back), from the positions the last run() ended
   // with and the planes, their carried slips and the summed normal corrections as it left them
   // there (collider_normal: the host's copy of those, sent only if the device holds others).
-  // False where the device holds no run() of n grains since its arrays were last sent.
+  // False where the device holds no run() of n grains since its arrays were last sent (the
+  // positions save_pair_history() sent stand for its end). out null: the slips stay there, with
+  // the rows, colliders and sums they belong to, for load_plane_history() (or
+  // fetch_plane_history()); false where the planes there are not the last find_planes()'s.
   bool save_plane_history(const gr_grains& g, const gr_params& prm, const IterationSizes& size,
                           const float* collider_normal, float* out);
-  bool load_pair_history(const IterationSizes& size, bool kept, const int* id, const int* hist_id,
-                         size_t hist_n, size_t table_size);
+  // `same`: the grains are the saved ones in the same order (each its own index there; id and
+  // hist_id not read)
+  bool load_pair_history(const IterationSizes& size, bool kept, bool same, const int* id,
+                         const int* hist_id, size_t hist_n, size_t table_size);
+  // The next substep's carried plane slips (g.plane_slip) made there from the slips the last
+  // save_plane_history() kept (gr_load_plane_slips): each grain found by id, or `same`, as
+  // load_pair_history() finds it, in the planes the last find_planes() left there
+  // (size.planes_there). False, nothing changed, where the device holds no such save or planes.
+  bool load_plane_history(const IterationSizes& size, bool same, const int* id, const int* hist_id,
+                          size_t hist_n, size_t table_size);
+  // the kept plane history into host memory: its rows (n + 1), and an entry's collider, summed
+  // normal correction and slip (3 floats)
+  void fetch_plane_history(std::vector<uint32_t>* offsets, std::vector<int32_t>* which,
+                           std::vector<float>* normal, std::vector<float>* slip);
+  // the carried plane slips there (3 floats an entry) and the collider sums the last run() left
+  void fetch_plane_slips(float* out, float* collider_normal, size_t entries);
   // the last save's slips (3 floats an entry) and, into *rows where given, the rows they belong
   // to; and the slips the last load made (3 floats an entry of the substep's rows), into host
   // memory

@@ -12,11 +12,13 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
           "[opencl][jacobi]") {
   // The 512 falling grains with ids, contact_solver jacobi (friction and pre-stabilization on),
   // 120 substeps, twice: the contacts' slips saved and carried on the host (host_history), and
-  // on the device where its search's rows are (the ground's saved there too). The rows are rebuilt
-  // through the fall (each contact's slip looked up by the grains' ids in the last substep's rows)
-  // and kept once the grains lie on the ground (each slip where it was saved); at the 40th substep
-  // the grains come in another order, at the 80th 13 are killed and 13 born in the air, and at the
-  // 60th the device's run saves its state and reads it back (the saved slips come back for it).
+  // on the device where its search's rows are (the ground's saved and carried there too, found
+  // by id in its last planes, or as the grain's own where the order is the same). The rows are
+  // rebuilt through the fall (each contact's slip looked up by the grains' ids in the last
+  // substep's rows) and kept once the grains lie on the ground (each slip where it was saved); at
+  // the 40th substep the grains come in another order, at the 80th 13 are killed and 13 born in
+  // the air, and at the 60th the device's run saves its state and reads it back (the saved slips
+  // come back for it).
   // Both write the same floats (kernels/history.h: no multiply and add fused on either side): the
   // two runs end every substep with the same positions and velocities, bit for bit.
   // With update_neighbors_during_iterations the rows are found again during the iterations,
@@ -73,6 +75,11 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
     const size_t planes = there.solver.plane_histories_saved_on_device();
     CHECK(host.solver.plane_histories_saved_on_device() == 0);
     CHECK(planes == (rebuild ? 0 : 120));
+    // and kept there with the planes, which stay there (jacobi_planes_stay), the next substep's
+    // carried slips made there from them: every substep's but the first (no history) and the
+    // one after the state was read back (the state's history, looked up here)
+    CHECK(host.solver.plane_histories_loaded_on_device() == 0);
+    CHECK(there.solver.plane_histories_loaded_on_device() == (rebuild ? 0 : 118));
     if (rebuild) {  // every substep's rows found again: every history saved, then looked up
       CHECK(saved >= 110);
       CHECK(looked_up >= 100);

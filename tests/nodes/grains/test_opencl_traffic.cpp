@@ -138,21 +138,21 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
   // slips are saved there at each substep's end and carried into the next there (looked up by
   // the grains' ids in the last rows, or found in place). The substep runs there from its
   // prediction to its end (GrainsSolver::jacobi_on_device), which makes the next one's start
-  // there (carry_start): after the first, a substep sends at most, a grain, the ids of the
-  // grains now and in the last substep for a lookup (8 B); the planes' carried slips, 12 B an
-  // entry; and 136 B a collider, 12 for the force and 1 KiB of flags and sums (their zeros
-  // filled from one word). Sending the rows (4 B a grain and an entry) in any call, or the
-  // rows' slips (12 B an entry), would fail that bound, and so would a grain's position (12 B).
+  // there (carry_start), and the collider planes' carried slips are made there from those it
+  // saved with its planes (the grains the same, in the same order: no ids go up for a lookup):
+  // after the first, a substep sends at most 136 B a collider, 12 for the force and 1 KiB of
+  // flags and sums (their zeros filled from one word). Sending the rows (4 B a grain and an
+  // entry) in any call, the rows' slips (12 B an entry), the grains' ids (4 B a grain) or a
+  // grain's position (12 B) would fail that bound.
   // A substep that kept its rows (no lookup of the slips by id; from the 48th on) receives at
-  // most, a grain: the written positions and velocities (24 B); the collider planes' rows (4 B
-  // a grain, and 40 B an entry: a plane and its collider), which the host's friction sums and
-  // history index, and 16 B an entry more (the collider sums and the planes' saved slips); the
-  // largest moves of the Verlet test and of
-  // each pre-stabilization pass (1,024 floats each); the overlap statistics where they were
-  // measured along the rows on the device (1,024 runs of 3 doubles), or the rows where they
-  // came back for them (4 B a grain and an entry, GrainsSolver::read_rows); and 1 KiB of flags.
-  // The friction each grain received (12 B), the pair sums (4 B an entry) or the iterations'
-  // positions (12 B) coming back would fail that one.
+  // most, a grain: the written positions and velocities (24 B); the number of plane entries
+  // (4 B in all: the planes, their colliders and sums and their saved slips stay there); the
+  // largest moves of the Verlet test and of each pre-stabilization pass (1,024 floats each);
+  // the overlap statistics where they were measured along the rows on the device (1,024 runs
+  // of 3 doubles), or the rows where they came back for them (4 B a grain and an entry,
+  // GrainsSolver::read_rows); and 1 KiB of flags. The friction each grain received (12 B), the
+  // pair sums (4 B an entry), the planes' rows (4 B a grain) or the iterations' positions
+  // (12 B) coming back would fail that one.
   test::Scene sc = jacobi_block();
   const double n = double(sc.size()), colliders = double(sc.colliders.size());
   int stabilized = 0, kept = 0;
@@ -164,34 +164,34 @@ TEST_CASE("use_opencl: the Jacobi path keeps its rows and contact history on the
     const double sent = double(sc.solver.device_traffic().sent - before.sent);
     const double received = double(sc.solver.device_traffic().received - before.received);
     const double rows = double(sc.solver.candidate_entries());
-    const double planes = double(sc.solver.collider_planes().offsets->back());
+    const double planes = double(sc.solver.plane_entries());
     // the first substep's start, 12 B a grain (its velocities, zero, filled from one word)
-    const double most =
-        (k == 0 ? 12 * n + 4 : 0) + 8 * n + 12 * planes + 136 * colliders + 12 + 1024;
+    const double most = (k == 0 ? 12 * n + 4 : 0) + 136 * colliders + 12 + 1024;
     INFO("substep " << k << ": sent " << sent / n << " B a grain, " << rows / n
                     << " row entries and " << planes / n << " plane entries a grain");
     CHECK(sc.solver.rows_from_device());
     CHECK(sc.solver.finished_on_device());
     CHECK(sent <= most);
-    CHECK(sent + std::min(4 * (n + 1 + rows), 12 * n) > most);
+    CHECK(sent + 4 * n > most);
     stabilized += sc.solver.stabilize_passes() > 0;
     // from the 48th substep on, the grains at rest, and only where the rows were kept
     if (k < 48 || sc.solver.histories_looked_up_on_device() > lookups) continue;
     ++kept;
     const bool measured_there = sc.solver.overlaps_on_device() > overlaps;
     const bool came_back = sc.solver.rows_brought_back() > back;
-    const double most_back =
-        24 * n + 4 * (n + 1) + 56 * planes + 4096 * (1 + sc.solver.stabilize_passes()) +
-        (measured_there ? 24576 : 0) + (came_back ? 4 * (n + 1 + rows) : 0) + 1024;
-    INFO("received " << received / n << " B a grain");
+    const double most_back = 24 * n + 4 + 4096 * (1 + sc.solver.stabilize_passes()) +
+                             (measured_there ? 24576 : 0) + (came_back ? 4 * (n + 1 + rows) : 0) +
+                             1024;
+    INFO("received " << received / n << " B a grain, " << planes / n << " plane entries a grain");
     CHECK(received <= most_back);
-    CHECK(received + 12 * n > most_back);
+    CHECK(received + 4 * n > most_back);
   }
   CHECK(kept >= 60);
   // the premises: pre-stabilization read the rows too, and the device saved every history
   CHECK(stabilized >= 100);
   CHECK(sc.solver.histories_saved_on_device() == 120);
   CHECK(sc.solver.plane_histories_saved_on_device() == 120);
+  CHECK(sc.solver.plane_histories_loaded_on_device() == 119);
 }
 
 TEST_CASE("use_opencl: the Jacobi path's rows stay on the device", "[opencl][jacobi]") {
@@ -319,8 +319,10 @@ TEST_CASE("use_opencl: the Jacobi path's pair sums stay on the device", "[opencl
   // iterations; and on the device, where they stay (they come back only for a rebuild of the
   // rows during the iterations or a history the device cannot make: GrainsSolver::sync_sums).
   // The two runs give the same positions every substep, and what the device's run receives is
-  // the host's run's less exactly the pair sums, and more the collider planes' slips it saves
-  // (12 B a plane entry, which the host's history makes from the positions it has).
+  // the host's run's less exactly the pair sums and the collider planes, which stay there with
+  // the history made there (jacobi_planes_stay): their rows (4 B a grain: the number of entries
+  // alone comes back), their entries and colliders (40 B an entry) and the collider sums (4 B
+  // an entry) the host's history reads.
   test::Scene there = jacobi_block();
   there.s.fetch_rows = true;  // as the host's history reads them
   there.s.host_finish = true;  // and the end made here, as the host's history needs
@@ -330,10 +332,10 @@ TEST_CASE("use_opencl: the Jacobi path's pair sums stay on the device", "[opencl
   for (int k = 0; k < 120; ++k) {
     const double less = twin_substep(there, host).received;
     const double rows = double(there.solver.candidates()->indices.size());
-    const double planes = double(there.solver.collider_planes().offsets->back());
+    const double planes = double(there.solver.plane_entries());
     INFO("substep " << k << ": " << rows / n << " row entries a grain, " << less / n
                     << " B a grain less received");
     CHECK(rows > 0);
-    CHECK(less == 4 * rows - 12 * planes);
+    CHECK(less == 4 * rows + 4 * n + 44 * planes);
   }
 }

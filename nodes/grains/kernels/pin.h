@@ -19,13 +19,14 @@ GR_INLINE float gr_pin_scale(const gr_grains* g, const gr_params* prm, int i) {
   return prm->target_weight * gr_attr(g->targetweight, i) * fraction;
 }
 
-/* Grain i's position after its pin. */
+/* Grain i's position after its pin (fused, gr_fmadd: the host's pins and a device's make the
+ * same floats). */
 GR_INLINE gr_float3 gr_project_pin(const gr_grains* g, const gr_params* prm,
                                    const GR_GLOBAL float* p, int i) {
   const gr_float3 x = gr_load3(p, i);
   const float scale = gr_pin_scale(g, prm, i);
   if (!(scale > 0.0f)) return x;
-  return gr_madd(x, gr_sub(gr_load3(g->targetP, i), x), scale);
+  return gr_fmadd(x, gr_sub(gr_load3(g->targetP, i), x), scale);
 }
 
 #endif /* GRAINS_KERNELS_PIN_H */

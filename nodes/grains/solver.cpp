@@ -932,11 +932,11 @@ void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
 }
 
 // the settings under which a Jacobi substep's stages chain on the device (jacobi_on_device: no
-// Chebyshev step, no rebuild during the iterations, no history made here, none of the test
-// switches that keep a stage here); the substep's grains decide the rest
+// rebuild during the iterations, no history made here, none of the test switches that keep a
+// stage here); the substep's grains decide the rest
 static bool jacobi_chain(const GrainsSettings& s) {
-  return s.contact_solver != kContactGaussSeidel &&
-         !(s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY) &&
+  const bool chebyshev = s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY;
+  return s.contact_solver != kContactGaussSeidel && !(chebyshev && s.host_chebyshev) &&
          !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
          !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
 }
@@ -1406,8 +1406,9 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
   const GrainsSettings& s = c.s;
   const bool chebyshev = s.chebyshev_rho > 0 && c.iterations > GR_CHEBYSHEV_DELAY;
-  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on && !chebyshev &&
-         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations;
+  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on &&
+         !(chebyshev && s.host_chebyshev) && !s.update_neighbors_during_iterations &&
+         !s.update_collisions_during_iterations;
 }
 
 bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
@@ -1417,10 +1418,10 @@ bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
 // use_opencl with jacobi: the substep's prediction, pre-stabilization, iterations and end chained
 // on the device, the positions staying there between them (its end comes back, or stays, as
 // gauss_seidel's does; carry_start takes the next start from it), where nothing between them
-// runs here: no rigid shapes, no Chebyshev step, no rows or planes found again during the
-// iterations (iterate's device_whole), no impact data (its momenta read the passes' sums and
-// positions here), no contact history made here (host_history), and none of the test switches
-// send_history_p, host_predict and host_finish.
+// runs here: no rigid shapes, no rows or planes found again during the iterations
+// (jacobi_whole; Chebyshev's step is made there too), no impact data (its momenta read the passes'
+// sums and positions here), no contact history made here (host_history), and none of the test
+// switches send_history_p, host_predict and host_finish.
 bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
   return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_on &&
          !(c.d.impact_impulse && c.colliders_on);
@@ -1509,8 +1510,9 @@ void GrainsSolver::run_friction(SubstepContext& c) {
 // shapes, the friction pass (after every iteration with accurate friction, else once after the
 // loop) and the pins; friction is its own pass, never inside the contact gather. With use_opencl
 // the device runs the grain loops: with nothing between them on the host (no shape matching, no
-// rebuild during the iterations, no Chebyshev step) every pass of the substep is one call;
-// otherwise each pass is a call of its own and the host does the rest between them, as here.
+// rebuild during the iterations) every pass of the substep is one call, Chebyshev's step made
+// there too; otherwise each pass is a call of its own and the host does the rest between them,
+// as here.
 void GrainsSolver::iterate(SubstepContext& c) {
   const GrainsSettings& s = c.s;
   const long ln = static_cast<long>(n_);
@@ -1522,8 +1524,9 @@ void GrainsSolver::iterate(SubstepContext& c) {
   if (device) open_device();
   const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
   float omega = 1.0f;
-  if (chebyshev) p_before_ = p_;  // x_{-1} = x_0: the first step is plain Jacobi (omega 1)
   const bool device_whole = jacobi_whole(c);
+  // x_{-1} = x_0: the first step is plain Jacobi (omega 1); the device's whole call keeps its own
+  if (chebyshev && !device_whole) p_before_ = p_;
   // the Jacobi chain there (jacobi_on_device): the prediction the device holds, moved there by
   // pre-stabilization where it ran, and the substep's end there
   opencl::JacobiSolve w;
@@ -1532,6 +1535,7 @@ void GrainsSolver::iterate(SubstepContext& c) {
     w.p_there = p_on_device_ && (stable_there_ || !stabilized_);
     if (w.p_there) w.finish = finish_there(c, &end);
   }
+  if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
   if (device_whole)
     device_passes(c, w.p_there ? p_.data() : host_p(c), iterations, false, true, &w);
   device_.p_there = device_whole;  // nothing here changes p_ before the history's save

@@ -102,6 +102,10 @@ struct GrainsSettings {
   // the device holds them from the iterations (GrainsSolver::save_history; the tests compare
   // the two)
   bool send_history_p = false;
+  // use_opencl with jacobi: Chebyshev's step made on the host between the iterations, each a
+  // device call of its own, even where the device's whole call of them makes it
+  // (GrainsSolver::jacobi_whole; the tests compare the two)
+  bool host_chebyshev = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -584,7 +588,7 @@ class GrainsSolver {
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;
   // use_opencl with jacobi: the iterations are one device call, nothing between them here (no
-  // rigid shapes, no Chebyshev step, no rows or planes found again during them)
+  // rigid shapes, no rows or planes found again during them; Chebyshev's step made there)
   bool jacobi_whole(const SubstepContext& c) const;
   // ... and this substep's collider planes may stay there: no stage here reads them (no impact
   // data, the contact history made there)

@@ -52,8 +52,9 @@ GR_INLINE float gr_chebyshev_omega(int iteration, float rho, float previous) {
   return 4.0f / (4.0f - rho * rho * previous);
 }
 
+/* (fused, gr_fmadd: the host's step and a device's make the same floats) */
 GR_INLINE gr_float3 gr_chebyshev(gr_float3 x_hat, gr_float3 x_before, float omega) {
-  return gr_madd(x_before, gr_sub(x_hat, x_before), omega);
+  return gr_fmadd(x_before, gr_sub(x_hat, x_before), omega);
 }
 
 /* the factor the averaged sum is applied with */

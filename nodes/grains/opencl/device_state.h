@@ -163,6 +163,10 @@ struct Iterations::Impl {
   // it went up (0: none)
   cl_kernel shift = nullptr;
   Buffer shifted;
+  // Chebyshev's step within run() (JacobiSolve::chebyshev_rho): the kernel, and the iterate
+  // before the last where neither p nor next holds it
+  cl_kernel chebyshev = nullptr;
+  Buffer before;
   size_t start_kept = 0;
   // the Jacobi path's contact history (history.cpp, kernels/history.h): the kernels, the slips
   // the last save wrote (hist_entries of them, of hist_grains grains) with the rows they belong
@@ -278,7 +282,7 @@ struct Iterations::Impl {
                       &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
                       &wave_ends, &block_waves, &hist_slip, &hist_offsets, &hist_indices,
                       &hist_id, &hist_table, &plane_saved, &hist_plane_offsets,
-                      &hist_plane_which, &hist_plane_sum, &shifted})
+                      &hist_plane_which, &hist_plane_sum, &shifted, &before})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -304,7 +308,7 @@ struct Iterations::Impl {
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table_kernel,
                         load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
-                        shift})
+                        shift, chebyshev})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

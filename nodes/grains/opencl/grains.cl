@@ -484,6 +484,15 @@ __kernel void gr_k_largest(__global const float* v, int n, __global float* part)
   part[w] = most;
 }
 
+/* Chebyshev's step after an iteration (kernels/iterate.h): grain i's iterate before the last,
+ * prev, becomes the next, from the iteration's result x_hat and omega */
+__kernel void gr_k_chebyshev(__global const float* x_hat, __global float* prev, float omega,
+                             int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  gr_store3(prev, i, gr_chebyshev(gr_load3(x_hat, i), gr_load3(prev, i), omega));
+}
+
 /* pins, once an iteration and last (kernels/pin.h): each grain moves only itself, in place */
 __kernel void gr_k_pin(gr_params prm, __global const float* targetP,
                        __global const float* targetweight, __global const float* targetstiffness,

@@ -368,8 +368,38 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   // pins (g.targetstiffness set): their own group after each iteration, in place, on `from`
   const bool pins = g.targetP && g.targetstiffness;
   if (pins) m.set_pins(g, prm, n);
+  // Chebyshev: the iterate before the last in `before` (x_{-1} = x_0: the first steps are plain
+  // Jacobi), which the step makes the next; the three buffers then turn
+  const bool chebyshev = w.chebyshev_rho > 0.0f;
+  Buffer* before = &m.before;
+  float omega = 1.0f;
+  if (chebyshev) {
+    m.before.reserve(m.ctx, (3 * n + 1) * f, m.largest);
+    m.copy_positions(m.before, *from, n);
+    const int items = static_cast<int>(n);
+    cl_kernel k = m.kernel(m.chebyshev, "gr_k_chebyshev");
+    check(clSetKernelArg(k, 3, sizeof(int), &items), "clSetKernelArg");
+  }
   for (int it = 0; it < iterations; ++it) {
-    pass(m.iterate);
+    if (chebyshev) {
+      omega = gr_chebyshev_omega(it, w.chebyshev_rho, omega);
+      Buffer* was = from;
+      pass(m.iterate);  // into to: x^
+      if (omega != 1.0f) {
+        set_buffer(m.chebyshev, 0, from);
+        set_buffer(m.chebyshev, 1, before);
+        check(clSetKernelArg(m.chebyshev, 2, sizeof(float), &omega), "clSetKernelArg");
+        check(clEnqueueNDRangeKernel(m.queue, m.chebyshev, 1, nullptr, &global, &local, 0, nullptr,
+                                     nullptr),
+              "clEnqueueNDRangeKernel");
+        to = from, from = before;
+      } else {
+        to = before;
+      }
+      before = was;
+    } else {
+      pass(m.iterate);
+    }
     if (friction_pass && accurate_friction) pass(m.friction);
     if (pins) m.project_pins(from, global);
   }

@@ -156,6 +156,9 @@ struct SequentialSolve {
 struct JacobiSolve {
   bool p_there = false;
   const SubstepEnd* finish = nullptr;
+  // above 0: Chebyshev's step after each iteration (kernels/iterate.h, gr_chebyshev_omega with
+  // this rho), made there
+  float chebyshev_rho = 0.0f;
 };
 
 // What crosses between the host and the device: bytes each way, and the transfers that carried

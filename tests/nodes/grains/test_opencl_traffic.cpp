@@ -293,8 +293,9 @@ TEST_CASE("use_opencl: the Jacobi path's history save takes the iterations' end 
   // the positions the iterations ended with where the device holds them (its whole-substep
   // call), and from those positions sent again (send_history_p). The same positions and
   // velocities every substep; the second sends exactly the positions more (12 B a grain) where
-  // the substep was one call, nothing more from substep 48 on, where Chebyshev's step between
-  // the iterations (made here) leaves the positions here and both send them.
+  // the substep was one call: with Chebyshev's step from substep 48 on too, which the call
+  // makes there (host_chebyshev, its step made here between the iterations, leaves the
+  // positions here, and both send them: nothing more).
   // (host_finish: the host predicts, pre-stabilizes and ends the substep, as send_history_p's
   // positions need; the chain that keeps those there is the test below's)
   test::Scene there = jacobi_block();
@@ -303,12 +304,15 @@ TEST_CASE("use_opencl: the Jacobi path's history save takes the iterations' end 
   sent.s.send_history_p = true;
   const double n = double(there.size());
   for (int k = 0; k < 96; ++k) {
-    for (test::Scene* sc : {&there, &sent}) sc->s.chebyshev_rho = k < 48 ? 0.0f : 0.9f;
+    for (test::Scene* sc : {&there, &sent}) {
+      sc->s.chebyshev_rho = k < 48 ? 0.0f : 0.9f;
+      sc->s.host_chebyshev = k >= 72;
+    }
     const size_t saved = there.solver.histories_saved_on_device();
     const double more = twin_substep(there, sent).sent;
     INFO("substep " << k << ": " << more / n << " B a grain more sent");
     CHECK(there.solver.histories_saved_on_device() == saved + 1);
-    CHECK(more == (k < 48 ? 12 * n : 0));
+    CHECK(more == (k < 72 ? 12 * n : 0));
   }
 }
 

@@ -436,6 +436,12 @@ struct Iterations::Impl {
   // the last substep's hist_n (hist_id, below table_size), once a substep (table_made)
   void history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,
                      size_t table_size);
+  // a lookup of carried slips (gr_k_load_pair_slips, gr_k_load_plane_slips: k) by the grains'
+  // ids, or `same` (each grain its own index there): the table and k's arguments 2 to 4 (id,
+  // table, its size); false where there is nothing to look up by (no ids, or not `usable`), the
+  // `floats` of slip then 0
+  bool lookup_by_id(cl_kernel k, Buffer& slip, size_t floats, bool same, bool usable, size_t n,
+                    const int* id, const int* hist_id, size_t hist_n, size_t table_size);
   void upload_contacts(const SequentialContacts& s);
   // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
   // once past their count

@@ -137,22 +137,15 @@ bool Iterations::load_plane_history(const IterationSizes& size, bool same, const
   slip.reserve(m.ctx, 3 * entries * f, m.largest);
   m.forget(slip);
   if (entries == 0) return true;
-  if (!same && (!hist_id || hist_n == 0 || table_size == 0 || m.hist_plane_grains != hist_n)) {
-    const float zero = 0.0f;
-    check(clEnqueueFillBuffer(m.queue, slip.mem, &zero, f, 0, 3 * entries * f, 0, nullptr, nullptr),
-          "clEnqueueFillBuffer");
-    return true;
-  }
-  if (!same) m.history_table(n, id, hist_id, hist_n, table_size);
   // offsets, which, id, table, table_size, hist_offsets, hist_which, hist_normal, hist_slip,
   // slip, n
   cl_kernel k = m.kernel(m.load_plane_slips, "gr_k_load_plane_slips");
-  const int table = same ? 0 : static_cast<int>(table_size), count = static_cast<int>(n);
+  if (!m.lookup_by_id(k, slip, 3 * entries, same, m.hist_plane_grains == hist_n, n, id, hist_id,
+                      hist_n, table_size))
+    return true;
+  const int count = static_cast<int>(n);
   set_buffer(k, 0, &m.arrays[kPlaneOffsets]);
   set_buffer(k, 1, &m.plane_collider);
-  set_buffer(k, 2, !same && id ? &m.id : nullptr);
-  set_buffer(k, 3, same ? nullptr : &m.hist_table);
-  check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
   set_buffer(k, 5, &m.hist_plane_offsets);
   set_buffer(k, 6, &m.hist_plane_which);
   set_buffer(k, 7, &m.hist_plane_sum);
@@ -181,6 +174,24 @@ void Iterations::fetch_plane_slips(float* out, float* collider_normal, size_t en
   Impl& m = *impl_;
   m.download(m.arrays[kPlaneSlip], out, 3 * entries * sizeof(float));
   m.download(m.collider_sum, collider_normal, entries * sizeof(float));
+}
+
+bool Iterations::Impl::lookup_by_id(cl_kernel k, Buffer& slip, size_t floats, bool same,
+                                    bool usable, size_t n, const int* id, const int* hist_id,
+                                    size_t hist_n, size_t table_size) {
+  if (!same && (!usable || !hist_id || hist_n == 0 || table_size == 0)) {
+    const float zero = 0.0f;
+    check(clEnqueueFillBuffer(queue, slip.mem, &zero, sizeof zero, 0, floats * sizeof zero, 0,
+                              nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    return false;
+  }
+  if (!same) history_table(n, id, hist_id, hist_n, table_size);
+  const int table = same ? 0 : static_cast<int>(table_size);
+  set_buffer(k, 2, !same && id ? &this->id : nullptr);
+  set_buffer(k, 3, same ? nullptr : &hist_table);
+  check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
+  return true;
 }
 
 void Iterations::Impl::history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,
@@ -226,20 +237,12 @@ bool Iterations::load_pair_history(const IterationSizes& size, bool kept, bool s
   slip.reserve(m.ctx, 3 * entries * f, m.largest);
   m.forget(slip);
   if (entries == 0) return true;
-  if (!same && (!hist_id || hist_n == 0 || table_size == 0)) {
-    const float zero = 0.0f;
-    check(clEnqueueFillBuffer(m.queue, slip.mem, &zero, f, 0, 3 * entries * f, 0, nullptr, nullptr),
-          "clEnqueueFillBuffer");
-    return true;
-  }
-  if (!same) m.history_table(n, id, hist_id, hist_n, table_size);
-  const int table = same ? 0 : static_cast<int>(table_size), count = static_cast<int>(n);
   cl_kernel k = m.kernel(m.load_pair_slips, "gr_k_load_pair_slips");
+  if (!m.lookup_by_id(k, slip, 3 * entries, same, true, n, id, hist_id, hist_n, table_size))
+    return true;
+  const int count = static_cast<int>(n);
   set_buffer(k, 0, &m.nb_offsets);
   set_buffer(k, 1, &m.nb_indices);
-  set_buffer(k, 2, !same && id ? &m.id : nullptr);
-  set_buffer(k, 3, same ? nullptr : &m.hist_table);
-  check(clSetKernelArg(k, 4, sizeof(int), &table), "clSetKernelArg");
   set_buffer(k, 5, &m.hist_offsets);
   set_buffer(k, 6, &m.hist_indices);
   set_buffer(k, 7, same ? nullptr : &m.hist_id);

@@ -931,12 +931,17 @@ void GrainsSolver::find_in_end(const int32_t* id, size_t n) {
   }
 }
 
+// whether chebyshev_rho steps the Jacobi iterations (more of them than the plain Jacobi ones that
+// start each substep: kernels/iterate.h)
+static bool chebyshev_steps(const GrainsSettings& s) {
+  return s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY;
+}
+
 // the settings under which a Jacobi substep's stages chain on the device (jacobi_on_device: no
 // rebuild during the iterations, no history made here, none of the test switches that keep a
 // stage here); the substep's grains decide the rest
 static bool jacobi_chain(const GrainsSettings& s) {
-  const bool chebyshev = s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY;
-  return s.contact_solver != kContactGaussSeidel && !(chebyshev && s.host_chebyshev) &&
+  return s.contact_solver != kContactGaussSeidel && !(chebyshev_steps(s) && s.host_chebyshev) &&
          !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
          !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
 }
@@ -1405,9 +1410,8 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 
 bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
   const GrainsSettings& s = c.s;
-  const bool chebyshev = s.chebyshev_rho > 0 && c.iterations > GR_CHEBYSHEV_DELAY;
   return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on &&
-         !(chebyshev && s.host_chebyshev) && !s.update_neighbors_during_iterations &&
+         !(chebyshev_steps(s) && s.host_chebyshev) && !s.update_neighbors_during_iterations &&
          !s.update_collisions_during_iterations;
 }
 
@@ -1522,7 +1526,7 @@ void GrainsSolver::iterate(SubstepContext& c) {
   const bool friction_pass = c.pair_friction_pass || c.collider_friction_pass;
   const bool device = s.use_opencl;
   if (device) open_device();
-  const bool chebyshev = s.chebyshev_rho > 0 && iterations > GR_CHEBYSHEV_DELAY;
+  const bool chebyshev = chebyshev_steps(s);
   float omega = 1.0f;
   const bool device_whole = jacobi_whole(c);
   // x_{-1} = x_0: the first step is plain Jacobi (omega 1); the device's whole call keeps its own

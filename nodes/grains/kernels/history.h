@@ -1,10 +1,9 @@
 /* The Jacobi path's contact history (GrainsSolver::save_history and load_history), grain by
  * grain: the host runs these functions through nodes/grains/history.cpp, a device through
  * opencl/grains.cl (gr_k_save_pair_slips, gr_k_load_pair_slips, gr_k_save_plane_slips,
- * gr_k_load_plane_slips), and both
- * write the same floats: every product and sum is written out without a multiply and an add
- * fused (the device's FP_CONTRACT off here, the host's file compiled with -ffp-contract=off) and
- * without OpenCL's dot(), whose order a device chooses.
+ * gr_k_load_plane_slips), and both write the same floats: every product and sum is written out
+ * without a multiply and an add fused (the device's FP_CONTRACT off here, the host's file compiled
+ * with -ffp-contract=off) and without OpenCL's dot(), whose order a device chooses.
  *
  * Each entry of a grain's neighbour row, and of its row of collider planes, keeps a slip (3
  * floats): what the contact slid tangentially in the substep and did not give back, which the

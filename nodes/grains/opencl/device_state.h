@@ -431,7 +431,6 @@ struct Iterations::Impl {
   // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x
   void set_pins(const gr_grains& g, const gr_params& prm, size_t n);
   void project_pins(Buffer* x, size_t global);
-  // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
   // hist_table: each id of the n grains now (id, null: their indices) at its grain's index in
   // the last substep's hist_n (hist_id, below table_size), once a substep (table_made)
   void history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,
@@ -442,6 +441,7 @@ struct Iterations::Impl {
   // `floats` of slip then 0
   bool lookup_by_id(cl_kernel k, Buffer& slip, size_t floats, bool same, bool usable, size_t n,
                     const int* id, const int* hist_id, size_t hist_n, size_t table_size);
+  // s's contacts to `seq` in parts of whole blocks (part_block), with their blocks and colours
   void upload_contacts(const SequentialContacts& s);
   // k over `items` work-items (at least one) in work-groups of kGroup: the kernels return at
   // once past their count

@@ -374,7 +374,6 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   Buffer* before = &m.before;
   float omega = 1.0f;
   if (chebyshev) {
-    m.before.reserve(m.ctx, (3 * n + 1) * f, m.largest);
     m.copy_positions(m.before, *from, n);
     const int items = static_cast<int>(n);
     cl_kernel k = m.kernel(m.chebyshev, "gr_k_chebyshev");

@@ -128,6 +128,12 @@ std::string ParamDecl::value_error(double v) const {
   constexpr double kFloatMax = 3.4028234663852886e38;
   if ((type == ParamType::Float || type == ParamType::Vec3) && !(std::fabs(v) <= kFloatMax))
     return "'" + name + "' must be within the float range (3.4e38 in size), got " + exact(v);
+  // ... and not so small that it becomes 0 as a float: a separation of 1e-300 passed "greater
+  // than 0" and made grains of radius 0, a mass of 1e-300 an anchor
+  if ((type == ParamType::Float || type == ParamType::Vec3) && v != 0 &&
+      static_cast<float>(v) == 0.0f)
+    return "'" + name + "' must be 0 or at least 1.4e-45 in size (the smallest float), got " +
+           exact(v);
   if (has_min && (min_exclusive ? !(v > min) : !(v >= min)))
     return "'" + name + "' must be " + (min_exclusive ? "greater than " : "at least ") +
            exact(min) + ", got " + exact(v);

@@ -110,6 +110,15 @@ void Simulation::checked(int node, F&& f) {
   } catch (const ParamRangeError& e) {
     throw LoadError(graph_.file, graph_.nodes[node].pointer + "/params/" + e.param,
                     "frame " + std::to_string(frame_ + 1) + ": " + e.what());
+  } catch (const BudgetError& e) {
+    // bad input found while cooking, named as a load error is: the graph, the node
+    throw LoadError(graph_.file, graph_.nodes[node].pointer, e.what());
+  } catch (const GeometryError& e) {
+    // a data file read while cooking (a source's points): its node's `file`
+    const NodeDesc& d = graph_.nodes[node];
+    const bool file = std::any_of(d.info->params.begin(), d.info->params.end(),
+                                  [](const ParamDecl& p) { return p.name == "file"; });
+    throw LoadError(graph_.file, d.pointer + (file ? "/params/file" : ""), e.what());
   }
 }
 
@@ -394,24 +403,50 @@ ParticleStore load_points(StateReader& r) {
     std::string name = r.text();
     Attribute a;
     r.value(a.type);
+    if (a.type != AttribType::Float && a.type != AttribType::Int && a.type != AttribType::Vec3)
+      r.fail("attribute '" + name + "' has an unknown type");
     r.array(a.f);
     r.array(a.i);
+    for (size_t k = 0; k < a.f.size(); ++k)
+      if (!std::isfinite(a.f[k]))
+        r.fail("attribute '" + name + "' of point " + std::to_string(k / a.components()) +
+               " is not finite");
     const size_t want_f = a.type == AttribType::Int ? 0 : n * a.components();
     const size_t want_i = a.type == AttribType::Int ? n : 0;
     if (a.f.size() != want_f || a.i.size() != want_i)
       r.fail("attribute '" + name + "' does not hold " + std::to_string(n) + " points");
     attributes.emplace_back(std::move(name), std::move(a));
   }
+  // every store holds positions; their size bounds n by the file's (add_points allocates n)
+  if (std::none_of(attributes.begin(), attributes.end(), [](const auto& a) {
+        return a.first == "P" && a.second.type == AttribType::Vec3;
+      }))
+    r.fail("the points have no positions");
   pts.add_points(n);
   for (auto& [name, a] : attributes) {
     Attribute& into = pts.add(name, a.type);
     into.f = std::move(a.f);
     into.i = std::move(a.i);
   }
+  // what a point file's reader refuses (geometry_io.cpp) is refused here too: the solvers index
+  // by these and take ids to be unique
+  if (const int32_t* id = pts.i_if("id"); id && n > 0) {
+    std::vector<int32_t> ids(id, id + n);
+    std::sort(ids.begin(), ids.end());
+    if (auto dup = std::adjacent_find(ids.begin(), ids.end()); dup != ids.end())
+      r.fail("duplicate point id " + std::to_string(*dup));
+    if (next_id <= ids.back())
+      r.fail("its next point id " + std::to_string(next_id) + " is not above every id (" +
+             std::to_string(ids.back()) + ")");
+  }
   pts.set_next_id(next_id);
   std::vector<int32_t> prims;
   r.array(prims);
   if (prims.size() % 2) r.fail("primitives must have two points each");
+  for (size_t k = 0; k < prims.size(); ++k)
+    if (prims[k] < 0 || static_cast<uint64_t>(prims[k]) >= n)
+      r.fail("primitive " + std::to_string(k / 2) + ": point " + std::to_string(prims[k]) +
+             " is out of range (" + std::to_string(n) + " points)");
   for (size_t p = 0; p + 1 < prims.size(); p += 2) pts.add_prim(prims[p], prims[p + 1]);
   for (uint64_t k = r.value<uint64_t>(); k > 0; --k) {
     const std::string name = r.text();
@@ -419,6 +454,10 @@ ParticleStore load_points(StateReader& r) {
     r.array(vals);
     if (vals.size() != prims.size() / 2)
       r.fail("primitive attribute '" + name + "' does not hold every primitive");
+    for (size_t k = 0; k < vals.size(); ++k)
+      if (!std::isfinite(vals[k]))
+        r.fail("primitive attribute '" + name + "' of primitive " + std::to_string(k) +
+               " is not finite");
     std::copy(vals.begin(), vals.end(), pts.prim_f(name));
   }
   return pts;

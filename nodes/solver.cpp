@@ -61,7 +61,8 @@ class SolverNode : public Node {
       if (pbd[k]) continue;
       Vec3 x0 = load3(P, k);
       Vec3 v0 = load3(v, k);
-      Vec3 a = load3(F, k) / m[k];
+      // mass 0 is an anchor (inverse mass 0, docs/design-notes.md): forces do not move it
+      Vec3 a = m[k] > 0 ? load3(F, k) / m[k] : Vec3{};
       Vec3 x1 = x0 + v0 * dt + a * (0.5f * dt * dt);
       Vec3 vk = v0 + a * dt;
       for (const ColliderState& c : cols) {

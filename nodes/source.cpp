@@ -97,6 +97,12 @@ class SourceNode : public Node {
     } else {  // rate
       int f = ctx.time.frame;
       if (f < p.start_frame || f > p.end_frame) return;
+      // what the frame will have emitted at this rate by its end, checked at its first substep:
+      // a rate far over the budget would otherwise fill it a substep at a time, slowly
+      if (ctx.time.substep == 0)
+        check_point_budget(ctx.node_name, std::floor(carry_ + p.rate / ctx.time.fps),
+                           ctx.pts.size(), ctx.max_points,
+                           "emitting " + count_text(p.rate) + " grains a second for a frame");
       carry_ += p.rate * ctx.time.dt;
       check_point_budget(ctx.node_name, std::floor(carry_), ctx.pts.size(), ctx.max_points,
                          "emitting " + count_text(p.rate) + " grains a second");

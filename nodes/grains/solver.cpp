@@ -1994,12 +1994,89 @@ void GrainsSolver::load_state(StateReader& r) {
   r.section("grains loads");
   r.value(seq_dt_);
   r.array(seq_loads_);
+  check_state(r);
   index_loads();
   seq_valid_ = false;
   device_.holds_contacts = device_.stale = device_.rows_stale = device_.rows_p_stale = false;
   device_.hist_stale = device_.slips_stale = device_.slips_there = false;
   device_.hist_planes_stale = device_.plane_slips_stale = false;
   device_.sums_there = device_.sums_stale = device_.friction_there = false;
+}
+
+namespace {
+
+// rows as saved (offsets, then entries): none, or ascending offsets from 0 to at most the
+// entries' count, each entry below `bound`
+void check_rows(const StateReader& r, const std::vector<uint32_t>& offsets, size_t entries,
+                const uint32_t* entry, size_t bound, const std::string& what) {
+  if (offsets.empty()) return;
+  if (offsets.front() != 0 || offsets.back() > entries ||
+      !std::is_sorted(offsets.begin(), offsets.end()))
+    r.fail(what + ": offsets that do not run from 0 within their entries");
+  for (size_t e = 0; entry && e < offsets.back(); ++e)
+    if (entry[e] >= bound)
+      r.fail(what + ": entry " + std::to_string(entry[e]) + " of " + std::to_string(bound));
+}
+
+void check_finite(const StateReader& r, const float* a, size_t count, const std::string& what) {
+  for (size_t k = 0; k < count; ++k)
+    if (!std::isfinite(a[k])) r.fail(what + ": a value that is not finite");
+}
+
+}  // namespace
+
+// A checkpoint's solver state, read as saved, checked as far as the next substep reads it: the
+// rows, history and rest shapes index one another and the grains, and a file altered with its
+// checksum made again must not send them out of range. (The history's own rows, hist_rows_, are
+// the rows before a rebuild: a substep copies them from neighbors_ before it reads them.)
+void GrainsSolver::check_state(const StateReader& r) const {
+  const size_t m = rows_ids_.size();
+  if (!std::isfinite(rows_skin_) || !std::isfinite(rows_query_scale_))
+    r.fail("the grains' rows have a skin that is not finite");
+  if (rows_valid_ && (rows_radius_.size() != m || rows_p_.size() != 3 * m ||
+                      (!neighbors_.offsets.empty() && neighbors_.offsets.size() != m + 1)))
+    r.fail("the grains' rows were built for another number of grains");
+  check_finite(r, rows_radius_.data(), rows_radius_.size(), "the grains' rows' radii");
+  check_finite(r, rows_p_.data(), rows_p_.size(), "the grains' rows' positions");
+  const size_t rows = neighbors_.offsets.empty() ? 0 : neighbors_.offsets.size() - 1;
+  if (!neighbors_.offsets.empty() && neighbors_.offsets.back() != neighbors_.indices.size())
+    r.fail("the grains' neighbour rows: offsets that do not end at their entries");
+  check_rows(r, neighbors_.offsets, neighbors_.indices.size(), neighbors_.indices.data(), rows,
+             "the grains' neighbour rows");
+  // the pairs' carried slips: an entry of those rows each, for these grains
+  const size_t k = hist_id_.size();
+  if (!hist_slip_.empty() &&
+      (rows != k || hist_slip_.size() != 3 * size_t(neighbors_.indices.size())))
+    r.fail("the contact history's slips do not match the grains' rows");
+  check_finite(r, hist_slip_.data(), hist_slip_.size(), "the contact history's slips");
+  const size_t old_rows = hist_rows_.offsets.empty() ? 0 : hist_rows_.offsets.size() - 1;
+  check_rows(r, hist_rows_.offsets, hist_rows_.indices.size(), hist_rows_.indices.data(),
+             std::max(old_rows, k), "the contact history's rows");
+  // the planes' carried slips: a row of planes for each grain of the history
+  if (k > 0 && !hist_plane_offsets_.empty() && hist_plane_offsets_.size() != k + 1)
+    r.fail("the contact history's planes do not match its grains");
+  check_rows(r, hist_plane_offsets_, hist_plane_collider_.size(), nullptr, 0,
+             "the contact history's planes");
+  if (!hist_plane_offsets_.empty() &&
+      hist_plane_slip_.size() < 3 * size_t(hist_plane_offsets_.back()))
+    r.fail("the contact history's plane slips do not match its planes");
+  check_finite(r, hist_plane_slip_.data(), hist_plane_slip_.size(),
+               "the contact history's plane slips");
+  if (!shape_key_.empty()) {
+    const int32_t grains = shape_key_[0];
+    if (grains < 0 || shape_key_.size() < 1 + size_t(grains) ||
+        rest_offset_.size() != 3 * size_t(grains) || comp_offsets_.empty() ||
+        comp_offsets_.back() != comp_members_.size())
+      r.fail("the rigid shapes were built for another number of grains");
+    check_rows(r, comp_offsets_, comp_members_.size(), comp_members_.data(), size_t(grains),
+               "the rigid shapes' components");
+    check_finite(r, rest_offset_.data(), rest_offset_.size(), "the rigid shapes' rest offsets");
+  }
+  if (!std::isfinite(seq_dt_) || seq_dt_ < 0) r.fail("the carried loads' substep is not a time");
+  for (const SeqLoad& l : seq_loads_) {
+    const float load[4] = {l.ln, l.lt[0], l.lt[1], l.lt[2]};
+    check_finite(r, load, 4, "the carried loads");
+  }
 }
 
 // ---- contact history ----

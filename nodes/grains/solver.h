@@ -339,6 +339,7 @@ class GrainsSolver {
   opencl::SequentialContacts contact_sweep();
 
  private:
+  void check_state(const StateReader& r) const;  // load_state's checks of what it read
   bool candidates_on_ = false;
   void build_constraints(const GrainsData& d);
   // leaves out of neighbors_ every pair joined by an explicit constraint (con_offsets_ and

@@ -7,7 +7,10 @@
 
 #include <catch2/catch.hpp>
 #include <chrono>
+#include <cstdint>
+#include <cstring>
 #include <filesystem>
+#include <limits>
 #include <thread>
 
 #include "tests/support/support.h"
@@ -195,5 +198,113 @@ TEST_CASE("resume refuses what would not continue the same run", "[checkpoint][c
   SECTION("--overwrite removes it with the frames") {
     REQUIRE(run_grains("run " + graph + " --out " + out + " --quiet --frames 1 --overwrite", log) == 0);
     CHECK_FALSE(fs::exists(out + "/checkpoint.grains"));
+  }
+}
+
+namespace {
+
+// A checkpoint's bytes (docs/output-format.md): its FNV-1a checksum, the last 8 bytes, made
+// again over contents altered on purpose, as someone who meant to would
+void reseal(std::string& bytes) {
+  uint64_t h = 1469598103934665603ULL;
+  for (size_t k = 0; k + 8 < bytes.size(); ++k) {
+    h ^= static_cast<unsigned char>(bytes[k]);
+    h *= 1099511628211ULL;
+  }
+  std::memcpy(&bytes[bytes.size() - 8], &h, 8);
+}
+
+uint64_t u64_at(const std::string& b, size_t at) {
+  uint64_t v;
+  std::memcpy(&v, b.data() + at, 8);
+  return v;
+}
+
+// where the section `name` (a length-prefixed text) ends
+size_t after_section(const std::string& b, const std::string& name) {
+  std::string text(8, '\0');
+  const uint64_t len = name.size();
+  std::memcpy(&text[0], &len, 8);
+  const size_t at = b.find(text + name);
+  REQUIRE(at != std::string::npos);
+  return at + 8 + name.size();
+}
+
+}  // namespace
+
+TEST_CASE("resume refuses a checkpoint altered with its checksum made again",
+          "[checkpoint][cli][hostile]") {
+  // a connected sheet of grains (primitives) and loose grains on it (the grains node's rows)
+  const std::string dir = temp_dir("resume_tampered");
+  const std::string graph = write_file(dir, "sheet.json", R"JSON({"grains_graph": 1,
+    "name": "tampered", "fps": 24, "frames": 4, "seed": 1, "nodes": [
+    {"name": "sheet", "type": "source", "params": {"shape": "grid", "center": [0, 0.1, 0],
+      "size": [0.1, 0, 0.1], "separation": 0.02, "connect_radius": 1.5}},
+    {"name": "loose", "type": "source", "params": {"shape": "box", "center": [0, 0.13, 0],
+      "size": [0.06, 0.04, 0.06], "separation": 0.02}},
+    {"name": "g", "type": "grains", "inputs": ["sheet", "loose"]},
+    {"name": "ground", "type": "collider", "params": {"shape": "plane"}},
+    {"name": "s", "type": "solver", "inputs": ["g"], "params": {"colliders": ["ground"]}}],
+    "output": {"dir": "unused"}})JSON");
+  const std::string out = dir + "/out", log = dir + "/log.txt";
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --quiet --frames 2 --checkpoint-every 1",
+                     log) == 0);
+  const std::string original = read_text(out + "/checkpoint.grains");
+  REQUIRE(run_grains("run --resume " + out + " --quiet --frames 3", log) == 0);  // as written
+  // the points: their count, next id, attributes (name, type, floats, ints), then primitives
+  size_t at = after_section(original, "points");
+  const uint64_t n = u64_at(original, at);
+  REQUIRE(n > 36);
+  const std::string points = std::to_string(n);
+  at += 8 + 4;
+  size_t pscale = 0;
+  const uint64_t attributes = u64_at(original, at);
+  at += 8;
+  for (uint64_t a = 0; a < attributes; ++a) {
+    const uint64_t len = u64_at(original, at);
+    const std::string name = original.substr(at + 8, len);
+    at += 8 + len + 4;
+    if (name == "pscale") pscale = at + 8;  // its first float
+    at += 8 + 4 * u64_at(original, at);
+    at += 8 + 4 * u64_at(original, at);
+  }
+  const size_t prims = at;
+  REQUIRE(pscale > 0);
+  REQUIRE(u64_at(original, prims) > 0);
+  // the grains node's rows: valid, skin, query scale, the cap, uniform; ids, radii, positions,
+  // offsets, then the rows' entries
+  at = after_section(original, "grains rows") + 1 + 4 + 4 + 4 + 1;
+  at += 8 + 4 * u64_at(original, at);
+  at += 8 + 4 * u64_at(original, at);
+  at += 8 + 4 * u64_at(original, at);
+  REQUIRE(u64_at(original, at) == n + 1);
+  at += 8 + 4 * u64_at(original, at);
+  REQUIRE(u64_at(original, at) > 0);
+  const size_t entries = at + 8;
+
+  struct Case {
+    const char* what;
+    size_t at;
+    int32_t value;
+    std::string message;
+  };
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  int32_t nan_bits;
+  std::memcpy(&nan_bits, &nan, 4);
+  for (const Case& c : {Case{"a primitive's point beyond the points", prims + 8 + 4, 1000,
+                             "primitive 0: point 1000 is out of range (" + points + " points)"},
+                        Case{"a primitive's point negative", prims + 8, -1,
+                             "primitive 0: point -1 is out of range"},
+                        Case{"a radius not a number", pscale, nan_bits,
+                             "attribute 'pscale' of point 0 is not finite"},
+                        Case{"a row's entry beyond the grains", entries, 1000000,
+                             "the grains' neighbour rows: entry 1000000 of " + points}}) {
+    INFO(c.what);
+    std::string bytes = original;
+    std::memcpy(&bytes[c.at], &c.value, 4);
+    reseal(bytes);
+    write_file(out, "checkpoint.grains", bytes);
+    CHECK(run_grains("run --resume " + out + " --quiet --frames 3", log) == 2);
+    CHECK(read_text(log).find(c.message) != std::string::npos);
   }
 }

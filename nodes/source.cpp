@@ -381,8 +381,19 @@ class SourceNode : public Node {
       grid[key(q[0], q[1], q[2])].push_back(static_cast<uint32_t>(i));
     }
     std::vector<std::pair<uint32_t, uint32_t>> pairs;
-    std::vector<float> rest;
+    // constraints count against the point budget at a tenth of a point each (about 60 of a
+    // point's 600 bytes): a connect_radius of many separations joins every pair, N^2 / 2
+    const double most = double(ctx.max_points) * 10.0;
     for (size_t i = first; i < end; ++i) {
+      if (double(s.prim_count() + pairs.size()) > most) {
+        char buf[300];
+        std::snprintf(buf, sizeof buf,
+                      "node '%s': connect_radius %g joins more than %.4g pairs of its %zu grains, "
+                      "over the budget of %zu points (a constraint counts a tenth of a point); "
+                      "raise it with --max-points",
+                      ctx.node_name.c_str(), p.connect_radius, most, end - first, ctx.max_points);
+        throw BudgetError(buf);
+      }
       Vec3 xi = load3(P, i);
       auto q = cell_of(xi);
       size_t row = pairs.size();

@@ -15,8 +15,23 @@ namespace grains {
 
 using json = nlohmann::json;
 
+namespace {
+
+// A message that quotes a bad value quotes at most its start and its end: an unknown type or
+// menu entry a megabyte long made a megabyte of error
+std::string shortened(std::string m) {
+  constexpr size_t kMost = 1000, kKept = 480;
+  if (m.size() <= kMost) return m;
+  const size_t cut = m.size() - 2 * kKept;
+  return m.substr(0, kKept) + " ... [" + std::to_string(cut) + " characters left out] ... " +
+         m.substr(m.size() - kKept);
+}
+
+}  // namespace
+
 LoadError::LoadError(std::string f, std::string p, std::string m)
-    : std::runtime_error(f + ": " + (p.empty() ? "" : p + ": ") + m),
+    : std::runtime_error(shortened(f) + ": " + (p.empty() ? "" : shortened(p) + ": ") +
+                         shortened(m)),
       file(std::move(f)),
       pointer(std::move(p)),
       message(std::move(m)) {}

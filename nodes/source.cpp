@@ -21,9 +21,10 @@
 #include "engine/geometry_io.h"
 #include "engine/mesh_shape.h"
 #include "engine/node.h"
+#include "engine/param_rows.h"
+#include "engine/simulation.h"
 #include "engine/state_stream.h"
 #include "nodes/common.h"
-#include "engine/param_rows.h"
 #include "nodes/register.h"
 
 namespace grains {
@@ -610,6 +611,35 @@ void register_source_node() {
     }
     if (!p.group.empty())
       if (std::string bad = group_name_problem(p.group); !bad.empty()) return {bad, "group"};
+    // a box, sphere or grid whose grains would lie where floats cannot tell them apart (the
+    // run's own check, Simulation::step_frame, stops at the first frame; exit 1): refused here
+    if ((p.shape == kBox || p.shape == kSphere || p.shape == kGrid) &&
+        !params.is_animated("center") && !params.is_animated("size") &&
+        !params.is_animated("radius") && !params.is_animated("pscale") &&
+        !params.is_animated("separation")) {
+      const double c[3] = {p.center.x, p.center.y, p.center.z};
+      const double size[3] = {p.size.x, p.size.y, p.size.z};
+      double centre = 0, extent = 0;
+      for (int k = 0; k < 3; ++k) {
+        centre = std::max(centre, std::fabs(c[k]));
+        extent = std::max(extent, p.shape == kSphere ? p.radius : 0.5 * std::fabs(size[k]));
+      }
+      const float r = p.pscale > 0 ? float(p.pscale) : 0.5f * float(p.separation);
+      const double most = precise_reach(r, kCoarsestResolution);
+      if (centre + extent > most) {
+        char buf[300];
+        std::snprintf(buf, sizeof buf,
+                      "its grains would lie up to %.4g m from the origin, where floats cannot "
+                      "tell grains of radius %.3g m apart; keep the shape within %.4g m of it",
+                      centre + extent, r, most);
+        // grains too small to place within a metre of the origin: their radius is what is wrong
+        const char* blame = most < 1.0           ? (p.pscale > 0 ? "pscale" : "separation")
+                            : centre >= extent   ? "center"
+                            : p.shape == kSphere ? "radius"
+                                                 : "size";
+        return {buf, blame};
+      }
+    }
     return {"", ""};
   };
   // its group's attribute; a file's own point attributes are known only once it is read

@@ -272,11 +272,13 @@ TEST_CASE("emission past the point budget is refused with the numbers before all
     std::string from, to, args, message;
   };
   const std::vector<Case> cases = {
-      {"\"separation\": 0.1", "\"separation\": 1e-9", "",
-       "node 'src': a box of 3"},  // 3e8 a side, as the float division gives it
-      {"\"size\": [0.3, 0.3, 0.3]", "\"size\": [1e30, 1e30, 1e30]", "", "more than the budget"},
-      {"\"separation\": 0.1,", "\"separation\": 0.1, \"emission\": \"rate\", \"rate\": 1e12,",
-       "", "emitting 1000000000000 grains a second"},
+      // (within the reach of floats: a separation of 1e-9 or a box of 1e30 m is refused before,
+      // for its precision: "far from the origin" below)
+      {"\"separation\": 0.1", "\"separation\": 1e-4", "",
+       "node 'src': a box of 3"},  // 3,000 a side, as the float division gives it
+      {"\"size\": [0.3, 0.3, 0.3]", "\"size\": [1e4, 1e4, 1e4]", "", "more than the budget"},
+      {"\"separation\": 0.1,", "\"separation\": 0.1, \"emission\": \"rate\", \"rate\": 1e12,", "",
+       "emitting 1000000000000 grains a second"},
       {"\"separation\": 0.1", "\"separation\": 0.1", "--max-points 26",
        "would bring the points to 27, more than the budget of 26"},
   };
@@ -355,11 +357,21 @@ TEST_CASE("far from the origin the run states its precision, warns, then refuses
                  Catch::Contains("resolved to 6.1e-05 m, 0.00122 of the smallest grain radius "
                                  "0.05 m") &&
                  Catch::Contains("within 512 m they would be"));
-  CHECK(run_at("1e7") == 1);
+  // a source placed there is refused at load, naming its parameter
+  CHECK(run_at("1e7") == 2);
   CHECK_THAT(read_text(dir + "/log"),
-             Catch::Contains("frame 1, solver 's': a point lies 1e+07 m from the origin, where a "
-                             "float resolves only 1 m, 20 times the smallest grain radius 0.05 m") &&
-                 Catch::Contains("within 6.554e+04 m"));
+             Catch::Contains("/nodes/0/params/center: its grains would lie up to 1e+07 m from the "
+                             "origin, where floats cannot tell grains of radius 0.05 m apart; "
+                             "keep the shape within 6.554e+04 m of it"));
+  CHECK_FALSE(fs::exists(dir + "/o/frame_0001.ply"));
+  // grains that get there stop the run at that frame: pushed up at 1e9 m/s^2, 8.7e5 m in a frame
+  std::string graph = write_file(dir, "g.json", drop("1e9"));
+  fs::remove_all(dir + "/o");
+  CHECK(run_grains("run " + graph + " --frames 2 --out " + dir + "/o", dir + "/log") == 1);
+  CHECK_THAT(read_text(dir + "/log"),
+             Catch::Contains("frame 1, solver 's': a point lies ") &&
+                 Catch::Contains("smallest grain radius 0.05 m: grains there cannot be told apart; "
+                                 "keep the scene within 6.554e+04 m of the origin"));
   CHECK_FALSE(fs::exists(dir + "/o/frame_0001.ply"));
 }
 

@@ -232,9 +232,29 @@ int cmd_run(RunRequest req) {
   if (!req.resume.empty()) resume.emplace(resumed_run(req));
   if (!req.graph_given && req.resume.empty())
     throw LoadError("grains run", "", "a graph is required: name a graph file, or --resume DIR");
-  std::vector<Override> overrides = parse_overrides(req.sets);
+  // a resumed run's overrides are the checkpoint's: one that no longer applies to the graph
+  // (which is the same file) is the checkpoint's fault, and named so
+  auto recorded = [&](const LoadError& e) {
+    return StateError(resume->path(), "its recorded --set do not apply: " + std::string(e.what()));
+  };
+  std::vector<Override> overrides;
+  try {
+    overrides = parse_overrides(req.sets);
+  } catch (const LoadError& e) {
+    if (resume) throw recorded(e);
+    throw;
+  }
   if (req.opencl) overrides.push_back(Override{"", "use_opencl", "true", "grains"});
-  Graph g = load_graph(req.graph, overrides);
+  Graph g;
+  try {
+    g = load_graph(req.graph, overrides);
+  } catch (const LoadError& e) {
+    if (!resume || req.sets.empty()) throw;
+    std::vector<Override> none;
+    if (req.opencl) none.push_back(Override{"", "use_opencl", "true", "grains"});
+    load_graph(req.graph, none);  // the graph's own fault (a data file since removed): thrown here
+    throw recorded(e);
+  }
   if (req.frames > 0) g.frames = req.frames;
   spdlog::debug("graph {}: {} nodes, {} solvers, {} frames at {:g} fps", req.graph, g.nodes.size(),
                 g.solvers.size(), g.frames, g.fps);

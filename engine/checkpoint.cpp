@@ -109,6 +109,10 @@ Checkpoint::Checkpoint(const std::string& dir) : path_(dir + "/" + kCheckpointFi
   r.value(record_.graph_hash);
   const uint64_t sets = r.value<uint64_t>();
   for (uint64_t k = 0; k < sets; ++k) record_.sets.push_back(r.text());
+  // paths and overrides are text: a NUL byte in one would cut every message that quotes it
+  if (record_.graph.find('\0') != std::string::npos) r.fail("its graph's path holds a NUL byte");
+  for (const std::string& s : record_.sets)
+    if (s.find('\0') != std::string::npos) r.fail("a --set it recorded holds a NUL byte");
   r.value(record_.frames);
   r.value(record_.checkpoint_every);
   r.value(record_.max_points);

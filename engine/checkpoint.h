@@ -38,6 +38,7 @@ class Checkpoint {
   explicit Checkpoint(const std::string& dir);
   const RunRecord& record() const { return record_; }
   int frame() const { return frame_; }  // the frames it had made
+  const std::string& path() const { return path_; }
   // Reads the state into a simulation of the record's graph (Simulation::load_state).
   void restore(Simulation& sim) const;
 

@@ -60,11 +60,12 @@ double precise_reach(float r, float fraction);
 // The solver node's parameters (engine/param_rows.h): nodes/solver.cpp registers them with the
 // node, and the evaluator, which runs each solver's substeps, reads them.
 #define SOLVER_PARAMS(ROW)                                                                       \
-  ROW(INT, substeps, 1, .at_least(1),                                                           \
+  ROW(INT, substeps, 1, .range(1, 1000000),                                                     \
       "substeps per frame, dt = 1 / (fps * substeps); with error control the fewest")           \
   ROW(TOGGLE, error_control, true, ,                                                            \
       "pick the substeps each frame to keep the grains' error under error_tolerance")           \
-  ROW(INT, max_substeps, 256, .at_least(1), "most substeps per frame error control may take")   \
+  ROW(INT, max_substeps, 256, .range(1, 1000000),                                              \
+      "most substeps per frame error control may take")                                         \
   ROW(FLOAT, error_tolerance, 0.0025, .positive(),                                              \
       "error control's bound on the mean overlap of touching grains, as a fraction "            \
       "of their summed radii (a resting column's relative loss of height)")                     \

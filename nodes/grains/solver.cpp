@@ -237,6 +237,8 @@ void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, in
       float e_start = gr_strain(gr_load3(P0, a), gr_load3(P0, b), L);
       float prev = d.strain ? d.strain[p] : 0.0f;
       strain = prev * decay + (e_end - e_start);
+      strain = std::clamp(strain, -std::numeric_limits<float>::max(),
+                          std::numeric_limits<float>::max());  // the sum may overflow
     }
     if (d.strain) d.strain[p] = strain;
     float strength = d.strength ? d.strength[p] : 1.0f;

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <limits>
 #include <thread>
+#include <tuple>
 
 #include "tests/support/support.h"
 
@@ -247,7 +248,9 @@ TEST_CASE("resume refuses a checkpoint altered with its checksum made again",
     {"name": "s", "type": "solver", "inputs": ["g"], "params": {"colliders": ["ground"]}}],
     "output": {"dir": "unused"}})JSON");
   const std::string out = dir + "/out", log = dir + "/log.txt";
-  REQUIRE(run_grains("run " + graph + " --out " + out + " --quiet --frames 2 --checkpoint-every 1",
+  const std::string set = "g.friction_with_particles=0.4";  // recorded: the resume applies it
+  REQUIRE(run_grains("run " + graph + " --out " + out + " --set " + set +
+                         " --quiet --frames 2 --checkpoint-every 1",
                      log) == 0);
   const std::string original = read_text(out + "/checkpoint.grains");
   REQUIRE(run_grains("run --resume " + out + " --quiet --frames 3", log) == 0);  // as written
@@ -306,5 +309,25 @@ TEST_CASE("resume refuses a checkpoint altered with its checksum made again",
     write_file(out, "checkpoint.grains", bytes);
     CHECK(run_grains("run --resume " + out + " --quiet --frames 3", log) == 2);
     CHECK(read_text(log).find(c.message) != std::string::npos);
+  }
+  // the run's record: a NUL byte in the graph's path cut every message that quoted it; an
+  // override altered was blamed on the command line
+  const size_t path = original.find("sheet.json"), recorded = original.find(set);
+  REQUIRE(path != std::string::npos);
+  REQUIRE(recorded != std::string::npos);
+  for (const auto& [what, at, byte, message] :
+       {std::tuple<const char*, size_t, char, std::string>{
+            "a NUL byte in the graph's path", path + 2, '\0',
+            "checkpoint.grains: its graph's path holds a NUL byte"},
+        {"an override altered", recorded + 1, 'X',
+         "checkpoint.grains: its recorded --set do not apply: --set: "
+         "'gXfriction_with_particles=0.4' is not NODE.PARAM=VALUE"}}) {
+    INFO(what);
+    std::string bytes = original;
+    bytes[at] = byte;
+    reseal(bytes);
+    write_file(out, "checkpoint.grains", bytes);
+    CHECK(run_grains("run --resume " + out + " --quiet --frames 3", log) == 2);
+    CHECK(read_text(log).find(message) != std::string::npos);
   }
 }

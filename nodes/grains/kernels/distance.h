@@ -22,7 +22,8 @@ GR_INLINE float gr_constraint_scale(const gr_grains* g, const gr_params* prm, in
 
 /* the strain of a constraint between points a and b with rest length L */
 GR_INLINE float gr_strain(gr_float3 a, gr_float3 b, float L) {
-  return L > 0.0f ? (gr_length(gr_sub(a, b)) - L) / L : 0.0f;
+  /* at most the largest float: a rest length of a few subnormal units made it infinite */
+  return L > 0.0f ? gr_min((gr_length(gr_sub(a, b)) - L) / L, 3.4028234663852886e38f) : 0.0f;
 }
 
 /* whether i and j share an explicit constraint (for skipping their contact) */

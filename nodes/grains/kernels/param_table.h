@@ -24,7 +24,7 @@ GR_PARAM(STRING, group, "", HOST, ,
          "act only on this point group of the stream (empty: the whole stream)")
 GR_PARAM(FLOAT, particle_separation, 0.1, HOST, .positive().unit("m"),
          "mean grain diameter hint: radius of points without pscale, mass-shock length scale")
-GR_PARAM(INT, constraint_iterations, 10, HOST, .at_least(1),
+GR_PARAM(INT, constraint_iterations, 10, HOST, .range(1, 100000),
          "Jacobi iterations per substep; about twice the stacking height")
 GR_PARAM(TOGGLE, assume_uniform_radius, 1, HOST, ,
          "search every grain as the largest one, with one grid cell size: faster; for grains of one size")

@@ -3,15 +3,14 @@
 // the law it checks and derives its tolerance in a comment. An immovable grain is one of mass 0
 // (inverse mass 0): it takes no share of any correction and moves only by its own velocity, so it
 // serves as a fixed anchor (v = 0) or a kinematic driver (v = const).
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/support.h"
@@ -546,4 +545,23 @@ TEST_CASE("source from a file keeps its own pscale and mass where the file has n
   CHECK(s.f_if("pscale")[1] == Approx(0.03));
   CHECK(s.f_if("mass")[0] == Approx(3));
   CHECK(s.f_if("mass")[1] == Approx(4));
+}
+
+TEST_CASE("a rest length of a few subnormal units gives a finite strain", "[grains][constraints]") {
+  // (len - L) / L overflows a float for L = 1e-44 m and len = 0.1 m; a strain of +inf reached the
+  // frames (a checkpoint altered with its checksum made again, or a point file's restlength).
+  // Two anchors, so that the pair keeps its length: the strain is as large as a float holds.
+  for (const bool instantaneous : {true, false}) {
+    INFO("instantaneous strain " << instantaneous);
+    Scene sc;
+    sc.s = settings(24, 2, 4);
+    sc.s.instantaneous_strain = instantaneous;
+    sc.add({0, 0, 0}, 0.02f, 0.0f);
+    sc.add({0.1f, 0, 0}, 0.02f, 0.0f);
+    sc.connect(0, 1, 1e-44f);
+    sc.run(0.1f);
+    REQUIRE(sc.strain.size() == 1);
+    CHECK(std::isfinite(sc.strain[0]));
+    if (instantaneous) CHECK(sc.strain[0] == std::numeric_limits<float>::max());
+  }
 }

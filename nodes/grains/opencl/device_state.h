@@ -273,6 +273,10 @@ struct Iterations::Impl {
   size_t kept_planes_n = 0, kept_plane_entries = 0;
 
   ~Impl() {
+    // what was enqueued and not waited for runs to its end first: PoCL compiles a kernel on its
+    // own thread at the kernel's first run, and a program that exited meanwhile crashed in LLVM
+    // (a released queue does not wait for its commands)
+    if (queue) clFinish(queue);
     for (Buffer& b : arrays) b.release();
     for (Buffer* b : {&p, &next, &scratch, &pair_sum, &collider_sum, &collider_dx, &friction_dx,
                       &target, &target_weight, &target_stiffness, &block_wave, &wave_start,

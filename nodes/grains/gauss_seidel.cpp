@@ -125,12 +125,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // finds each contact's carried load in the list its last solve left (build_sequential: the
   // list this host would build, bit for bit), so that the list crosses neither way; a device
   // whose work-items share a block orders its waves there too (Iterations::order_waves). The
-  // host builds it where the device does not: with impact data or rigid shapes (which read it
-  // here between passes), loads the device does not hold (read back from a saved state), a list
-  // larger than a device buffer.
+  // host builds it where the device does not: with impact data or rigid shapes projected here
+  // (which read it here between passes), loads the device does not hold (read back from a saved
+  // state), a list larger than a device buffer.
   opencl::Iterations::BuiltList built;
   const bool built_there =
-      device && !kept && !c.impacts && !c.shapes_on && (!warm || device_.holds_contacts) &&
+      device && !kept && !c.impacts && !c.shapes_here && (!warm || device_.holds_contacts) &&
       open_device().builds_contacts() &&
       open_device().build_sequential(g, prm, device_sizes(c), c.d.id,
                                      g.plane_offsets ? plane_collider_.data() : nullptr, warm,
@@ -440,15 +440,15 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const float relax = prm.over_relaxation;
   if (device) {
     // pre-stabilization, the velocity it takes back, the warm start (on_device, set above) and
-    // the passes on the device in one call, the same steps in the same order
-    // (opencl/iterations.h); shape matching stays here, so with shapes each pass is a call of
-    // its own and the pins follow the shapes here
+    // the passes, rigid shapes and pins on the device in one call, the same steps in the same
+    // order (opencl/iterations.h); on a device without double precision the shapes stay here,
+    // each pass then a call of its own and the pins following the shapes here
     opencl::SequentialContacts on = contact_sweep();
     on.resident = resident;
     on.built = built_there;
     // the list stays there unless the host reads it before the next substep (impact data,
-    // shapes' passes, below)
-    on.stay = !c.impacts && !c.shapes_on;
+    // shapes projected here, below)
+    on.stay = !c.impacts && !c.shapes_here;
     size_t loaded_there = 0;
     on.loaded = on.stay ? &loaded_there : nullptr;
     on.keep_warm = warm;
@@ -463,7 +463,22 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     gr_grains gd = g;
     gd.P = start;  // the device pre-stabilizes its own copy of the start
     if (!others.nbr_offsets) gd.nbr_offsets = gd.nbr_indices = nullptr, size.pair_entries = 0;
-    if (!c.shapes_on) {
+    // the shapes after each pass there too, where the device can (double precision)
+    opencl::SequentialContacts::Shapes shapes;
+    const bool shapes_there = c.shapes_on && !c.shapes_here;
+    if (shapes_there) {
+      const gr_shapes sh = shape_arrays(prm);
+      shapes.offsets = sh.offsets;
+      shapes.members = sh.members;
+      shapes.components = comp_offsets_.size() - 1;
+      shapes.rest = sh.rest;
+      shapes.mass = sh.mass;
+      shapes.generation = shape_generation_;
+      shapes.entries = sh.collider_normal ? collider_normal_.size() : 0;
+      shapes.collider_normal = shapes.entries > 0 ? collider_normal_.data() : nullptr;
+      on.shapes = &shapes;
+    }
+    if (!c.shapes_on || shapes_there) {
       // the substep's end there too (write_back takes what it wrote), unless the host reads the
       // passes' positions: for the impact data
       opencl::SubstepEnd end;
@@ -512,10 +527,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       gr_seq_pass(&g, &prm, p, &q, relax);
       return 0.0f;
     });
-    if (c.shapes_on) {
-      project_shapes(g, prm, c.threads);
-      p = p_.data();  // project_shapes swaps p_ with its goals
-    }
+    if (c.shapes_on) project_shapes(g, prm, c.threads);
     if (g.targetP) project_pins(c);
   }
 

@@ -11,8 +11,8 @@
 //      iteration's averaged update (Gauss-Seidel across groups, Jacobi within one, as Macklin
 //      et al. 2014 Alg. 1): averaged in with a grain's contacts, a goal would pull only 1/count
 //      of the way and a landing cube deformed by 12% of its side; projected, the components are
-//      rigid after every iteration. Goals per component, with Eigen; pins per grain
-//      (kernels/pin.h).
+//      rigid after every iteration. Goals per component (kernels/shapes.h); pins per
+//      grain (kernels/pin.h).
 //   4. v from the motion, blend and caps, drift (kernels/velocity.h); the final collision pass
 //      (swept, so thin and moving colliders hold); write P and v; collider impulses;
 //      stats.
@@ -32,7 +32,6 @@
 
 #include <omp.h>
 
-#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -48,6 +47,7 @@ static_assert(grains::GrainsSolver::kContactSlots == GR_MAX_PLANES, "contact slo
 #include "nodes/grains/kernels/mass_shock.h"
 #include "nodes/grains/kernels/velocity.h"
 #include "nodes/grains/opencl/iterations.h"
+#include "nodes/grains/shapes.h"
 #include "nodes/grains/sleep_rows.h"
 #include "nodes/grains/substep_context.h"
 
@@ -279,169 +279,26 @@ void GrainsSolver::update_constraints(GrainsData& d, const GrainsSettings& s, in
   }
 }
 
-// Rigid shape matching goals (Müller et al. 2005, "Meshless deformations based on shape
-// matching"; pbd_research.md §1): per component with centre of mass c and rest offsets rbar_i,
-// A = sum_i m_i (p_i - c) rbar_i^T = R S (polar decomposition, R from the SVD A = U D V^T as
-// U V^T, a reflection flipped to a rotation), goal g_i = c + R rbar_i. Grains in no component
-// keep g_i = p_i. Parallel over components; each writes only its members.
-void GrainsSolver::shape_goals(const float* p, int threads) {
-  const long n = static_cast<long>(n_);
-  float* goal = shape_goal_.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < n; ++i) store3(goal, i, load3(p, i));
-  const long comps = static_cast<long>(comp_offsets_.size()) - 1;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (long c = 0; c < comps; ++c) {
-    const uint32_t b = comp_offsets_[c], e = comp_offsets_[c + 1];
-    // the centre now and the rest offsets' own weighted mean (float offsets do not sum to 0
-    // exactly): measured from that mean, the goals keep the centre where it is. Without it
-    // each projection moved a body at rest by the offsets' rounding, and 20 projections a
-    // substep at 256 substeps a frame drove a free cube of 512 grains to 13 m/s in one frame
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero(), rest_mean = Eigen::Vector3d::Zero();
-    double msum = 0;
-    for (uint32_t k = b; k < e; ++k) {
-      uint32_t i = comp_members_[k];
-      Vec3 x = load3(p, i), r = load3(rest_offset_.data(), i);
-      centre += mass_[i] * Eigen::Vector3d(x.x, x.y, x.z);
-      rest_mean += mass_[i] * Eigen::Vector3d(r.x, r.y, r.z);
-      msum += mass_[i];
-    }
-    centre /= msum;
-    rest_mean /= msum;
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    for (uint32_t k = b; k < e; ++k) {
-      uint32_t i = comp_members_[k];
-      Vec3 x = load3(p, i), r = load3(rest_offset_.data(), i);
-      A += mass_[i] * (Eigen::Vector3d(x.x, x.y, x.z) - centre) *
-           (Eigen::Vector3d(r.x, r.y, r.z) - rest_mean).transpose();
-    }
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d U = svd.matrixU();
-    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
-    Eigen::Matrix3d R = U * svd.matrixV().transpose();
-    for (uint32_t k = b; k < e; ++k) {
-      uint32_t i = comp_members_[k];
-      Vec3 r = load3(rest_offset_.data(), i);
-      Eigen::Vector3d gi = centre + R * (Eigen::Vector3d(r.x, r.y, r.z) - rest_mean);
-      store3(goal, i, Vec3{static_cast<float>(gi.x()), static_cast<float>(gi.y()),
-                           static_cast<float>(gi.z())});
-    }
-  }
-}
-
-// Rigid shape matching as its own constraint group: every grain of a component moves to its goal
-// (others stay); then each component is translated out of its collider planes as a whole, by
-// the largest penetration along each axis among its members. Without that shift a body that
-// lands on a corner could only be pushed out through that corner grain's correction, diluted
-// over the component by the fit (1/N of it per iteration): it would sink, and the final
-// collision pass, grain by grain, would bend it (9% of the side for a 1,000-grain cube).
-// The penetration the shift removes joins each contact's normal sum (the bound of its friction),
-// and the contacts' slip is then taken out of the body as a whole (rigid_collider_friction).
+// Rigid shape matching as its own constraint group (kernels/shapes.h): every grain of a
+// component moves to its goal (others stay), each component is shifted out of its collider
+// planes as a whole, and its friction with them is taken out of the body as a whole.
 void GrainsSolver::project_shapes(const gr_grains& g, const gr_params& prm, int threads) {
   sync_planes();
-  shape_goals(p_.data(), threads);
-  p_.swap(shape_goal_);
-  if (plane_offsets_.size() != n_ + 1) return;
-  float* p = p_.data();
-  const bool friction = prm.friction_with_colliders > 0 && collider_normal_.size() == plane_offsets_[n_];
-  const long comps = static_cast<long>(comp_offsets_.size()) - 1;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (long c = 0; c < comps; ++c) {
-    Vec3 up, down;  // the largest positive and negative shift per axis
-    for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k) {
-      uint32_t i = comp_members_[k];
-      for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
-        const float* pl = plane_.data() + 9 * e;
-        Vec3 xs = load3(pl, 0), nrm = load3(pl, 1);
-        float d = radius_[i] - dot(load3(p, i) - xs, nrm);
-        if (!(d > 0)) continue;
-        if (friction) collider_normal_[e] += d;
-        Vec3 m = nrm * d;
-        up = {std::max(up.x, m.x), std::max(up.y, m.y), std::max(up.z, m.z)};
-        down = {std::min(down.x, m.x), std::min(down.y, m.y), std::min(down.z, m.z)};
-      }
-    }
-    Vec3 shift = up + down;
-    if (shift.x != 0 || shift.y != 0 || shift.z != 0)
-      for (uint32_t k = comp_offsets_[c]; k < comp_offsets_[c + 1]; ++k)
-        store3(p, comp_members_[k], load3(p, comp_members_[k]) + shift);
-    if (friction) rigid_collider_friction(static_cast<size_t>(c), g, prm, p);
-  }
+  gr_grains gs = g;
+  if (plane_offsets_.size() != n_ + 1) gs.plane_offsets = nullptr;
+  project_components(shape_arrays(prm), gs, prm, p_.data(), comp_offsets_.size() - 1, threads);
 }
 
-// Collider friction of a rigid component (help page "Friction: With Colliders", the law of
-// kernels/collider.h: slip below static_threshold x mu x the normal sum is stopped, above it
-// scale_kinetic x mu x the normal sum of it is taken out), applied to the body, not to its
-// contact grains: a grain's own friction moves only that grain, and the fit passes on 1/N of it,
-// so a 843-grain rock slid down a 25 degree slope it should have rolled down (10 degrees of turn
-// in 4 s). Each contact in turn (Gauss-Seidel, in member order) gets the impulse J = K^-1 D that
-// changes its point's slip by D, K = 1/M - [r]x I^-1 [r]x the body's compliance at r; the body's
-// translation J / M and rotation I^-1 (r x J) add up and move every member once, linearised
-// (the next projection restores the exact rigid shape).
-void GrainsSolver::rigid_collider_friction(size_t c, const gr_grains& g, const gr_params& prm, float* p) {
-  const uint32_t b = comp_offsets_[c], e_end = comp_offsets_[c + 1];
-  bool touching = false;
-  for (uint32_t k = b; k < e_end && !touching; ++k)
-    for (uint32_t e = plane_offsets_[comp_members_[k]]; e < plane_offsets_[comp_members_[k] + 1]; ++e)
-      touching = touching || collider_normal_[e] > 0;
-  if (!touching) return;
-  using V = Eigen::Vector3d;
-  auto at = [](const float* a, uint32_t i) { return V(a[3 * i], a[3 * i + 1], a[3 * i + 2]); };
-  V centre = V::Zero();
-  double mass = 0;
-  for (uint32_t k = b; k < e_end; ++k) {
-    const uint32_t i = comp_members_[k];
-    centre += double(mass_[i]) * at(p, i);
-    mass += mass_[i];
-  }
-  centre /= mass;
-  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
-  for (uint32_t k = b; k < e_end; ++k) {
-    const uint32_t i = comp_members_[k];
-    const V r = at(p, i) - centre;
-    inertia += double(mass_[i]) * (r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose());
-  }
-  // a line of grains has no inertia about its axis: a trace-relative floor keeps I invertible
-  inertia += 1e-6 * inertia.trace() * Eigen::Matrix3d::Identity();
-  const Eigen::Matrix3d inv_inertia = inertia.inverse();
-  auto skew = [](const V& r) {
-    Eigen::Matrix3d m;
-    m << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
-    return m;
-  };
-  V move = V::Zero(), turn = V::Zero();
-  for (uint32_t k = b; k < e_end; ++k) {
-    const uint32_t i = comp_members_[k];
-    const V r = at(p, i) - centre;
-    const double mu = double(prm.friction_with_colliders) * (g.friction ? g.friction[i] : 1.0f);
-    for (uint32_t e = plane_offsets_[i]; e < plane_offsets_[i + 1]; ++e) {
-      if (!(collider_normal_[e] > 0)) continue;
-      const float* pl = plane_.data() + 9 * e;
-      const V n(pl[3], pl[4], pl[5]), vc(pl[6], pl[7], pl[8]);
-      // the contact point's slip over the substep, relative to the collider's own motion
-      const V s = (at(p, i) + move + turn.cross(r)) - at(g.P, i) - vc * double(prm.dt);
-      const V slip = s - n * n.dot(s);
-      const double sl = slip.norm();
-      if (!(sl > 0)) continue;
-      const double bound = mu * collider_normal_[e];
-      const double keep = sl < double(prm.static_threshold) * bound
-                              ? 0.0
-                              : 1.0 - std::min(1.0, double(prm.scale_kinetic) * bound / sl);
-      if (keep >= 1.0) continue;
-      const V want = -slip * (1.0 - keep);
-      const Eigen::Matrix3d K = Eigen::Matrix3d::Identity() / mass - skew(r) * inv_inertia * skew(r);
-      const V J = K.ldlt().solve(want);
-      move += J / mass;
-      turn += inv_inertia * r.cross(J);
-    }
-  }
-  for (uint32_t k = b; k < e_end; ++k) {
-    const uint32_t i = comp_members_[k];
-    const V x = at(p, i) + move + turn.cross(at(p, i) - centre);
-    p[3 * i] = static_cast<float>(x.x());
-    p[3 * i + 1] = static_cast<float>(x.y());
-    p[3 * i + 2] = static_cast<float>(x.z());
-  }
+gr_shapes GrainsSolver::shape_arrays(const gr_params& prm) {
+  gr_shapes s;
+  s.offsets = comp_offsets_.data();
+  s.members = comp_members_.data();
+  s.rest = rest_offset_.data();
+  s.mass = mass_;
+  const bool friction = prm.friction_with_colliders > 0 && plane_offsets_.size() == n_ + 1 &&
+                        collider_normal_.size() == plane_offsets_[n_];
+  s.collider_normal = friction ? collider_normal_.data() : nullptr;
+  return s;
 }
 
 GrainsSolver::DeviceSlot::DeviceSlot() = default;
@@ -841,6 +698,8 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   // rigid shape matching: its components and rest shapes (build_shapes)
   c.shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
   if (c.shapes_on) build_shapes(d);
+  c.shapes_here = c.shapes_on && !(s.use_opencl && s.contact_solver == kContactGaussSeidel &&
+                                   open_device().shapes_there());
 
   // explicit constraints (c.constraints_on above)
   if (c.constraints_on) {
@@ -1197,7 +1056,7 @@ bool GrainsSolver::rows_stay(const SubstepContext& c) const {
       (c.constraints_on && !s.collide_mutually_constrained_particles))
     return false;
   if (s.contact_solver != kContactGaussSeidel) return !s.host_history;
-  return !c.impacts && !c.shapes_on && !(s.clumping_weight > 0);
+  return !c.impacts && !c.shapes_here && !(s.clumping_weight > 0);
 }
 
 void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
@@ -1330,7 +1189,7 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   device.radius_there = first && searched_there_ && rows_true_radius_;
   device.entries_stay =
       c.s.contact_solver == kContactGaussSeidel
-          ? !c.impacts && !c.shapes_on && (!c.s.use_opencl || open_device().builds_contacts())
+          ? !c.impacts && !c.shapes_here && (!c.s.use_opencl || open_device().builds_contacts())
           : jacobi_planes_stay(c);
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
   // the device's planes take the predicted positions there; the host's (a mesh collider's)
@@ -1610,6 +1469,7 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
   }
   if (key != shape_key_) {
     shape_key_.swap(key);
+    ++shape_generation_;
     std::vector<int32_t> parent(n);
     for (size_t i = 0; i < n; ++i) parent[i] = static_cast<int32_t>(i);
     for (size_t e = 0; e < d.prim_count; ++e) {
@@ -1650,9 +1510,6 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
         store3(rest_offset_.data(), comp_members_[k], load3(d.P, comp_members_[k]) - centre);
     }
   }
-  // 3 n + 1, as p_: project_shapes swaps the two, and the contact loop's block load reads
-  // one float past a grain's three (gr_load_block; AddressSanitizer caught the last grain's)
-  shape_goal_.resize(3 * n + 1);
 }
 
 // Pre-stabilization (gr_stabilize, Macklin et al. 2014 sec. 4.4): Jacobi passes of the contacts
@@ -1990,6 +1847,7 @@ void GrainsSolver::load_state(StateReader& r) {
   r.array(hist_plane_slip_);
   r.section("grains shapes");
   r.array(shape_key_);
+  ++shape_generation_;
   r.array(comp_offsets_);
   r.array(comp_members_);
   r.array(rest_offset_);

@@ -17,6 +17,7 @@
 #include "engine/state_stream.h"
 #include "nodes/grains/kernels/params.h"  // gr_grains, gr_params: the kernels' inputs
 #include "nodes/grains/kernels/sequential.h"  // gr_seq_contact
+#include "nodes/grains/kernels/shapes.h"      // gr_shapes
 #include "nodes/grains/kernels/sleep.h"       // gr_sleep_params
 
 namespace grains {
@@ -346,12 +347,13 @@ class GrainsSolver {
   // con_other_ built); keeps each row's order
   void drop_constrained_pairs(int threads);
   void update_constraints(GrainsData& d, const GrainsSettings& s, int threads, GrainsStats* stats);
-  void shape_goals(const float* p, int threads);
   // the shape goals, then each component out of its collider planes and, with collider
   // friction, its contacts' slip taken out as a rigid body (g: the substep's inputs, for P, the
-  // planes and the friction attribute)
+  // planes and the friction attribute), on p_ (kernels/shapes.h)
   void project_shapes(const gr_grains& g, const gr_params& prm, int threads);
-  void rigid_collider_friction(size_t component, const gr_grains& g, const gr_params& prm, float* p);
+  // the components, rest offsets, masses and (with collider friction) normal sums as the
+  // shared functions read them
+  gr_shapes shape_arrays(const gr_params& prm);
   // P, p in the substep's coordinates, world = those + origin (planes.cpp). device: found on
   // the OpenCL device when every collider is analytic; p_there: p is the positions the device's
   // search took, radius_there: radius_ its radii
@@ -738,10 +740,10 @@ class GrainsSolver {
   std::vector<float> collider_dx_;  // (n x GR_MAX_PLANES x 3) m: applied collider corrections
   // rigid shape matching: components of the edge graph, rest offsets, per-iteration goals
   std::vector<int32_t> shape_key_;     // ids then edges (as ids) the rest shapes were built for
+  uint64_t shape_generation_ = 0;      // counts the rest shapes built or read (a device's copy)
   std::vector<uint32_t> comp_offsets_;  // (components + 1) rows into comp_members_
   std::vector<uint32_t> comp_members_;  // grains of each component (components of 2 or more)
   std::vector<float> rest_offset_;      // (n x 3) m: rbar_i, i's rest offset from its centre
-  std::vector<float> shape_goal_;       // (n x 3) m: goal c + R rbar_i this iteration
 };
 
 }  // namespace grains

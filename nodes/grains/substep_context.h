@@ -22,6 +22,9 @@ struct GrainsSolver::SubstepContext {
   int threads = 1;
   int iterations = 0;
   bool pairs_on = false, colliders_on = false, constraints_on = false, shapes_on = false;
+  // rigid shapes projected here between a device's passes (jacobi's, or a device without double
+  // precision), not on the device after each of gauss_seidel's (SequentialContacts::shapes)
+  bool shapes_here = false;
   bool pair_friction_pass = false, collider_friction_pass = false, impacts = false;
   bool reusable = false;   // the neighbour rows may be kept across substeps (keep_rows)
   bool same_rows = false;  // they were: this substep's rows are the last one's

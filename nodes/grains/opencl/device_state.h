@@ -167,6 +167,11 @@ struct Iterations::Impl {
   // before the last where neither p nor next holds it
   cl_kernel chebyshev = nullptr;
   Buffer before;
+  // rigid shape matching (SequentialContacts::shapes): the kernel and the components' arrays
+  cl_kernel shapes = nullptr;
+  Buffer shape_offsets, shape_members, shape_rest, shape_mass, shape_normal;
+  uint64_t shape_generation = 0;  // of the components and rest offsets there (0: none)
+  size_t shape_grains = 0;        // ... for this many grains
   size_t start_kept = 0;
   // the Jacobi path's contact history (history.cpp, kernels/history.h): the kernels, the slips
   // the last save wrote (hist_entries of them, of hist_grains grains) with the rows they belong
@@ -299,7 +304,8 @@ struct Iterations::Impl {
                       &sleep_asleep, &sleep_woken, &sleep_changed, &sleep_offsets,
                       &sleep_indices, &carry_time, &carry_anchor, &carry_accel,
                       &carry_contacts, &motion_part,
-                      &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs})
+                      &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs,
+                      &shape_offsets, &shape_members, &shape_rest, &shape_mass, &shape_normal})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -312,7 +318,7 @@ struct Iterations::Impl {
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table_kernel,
                         load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
-                        shift, chebyshev})
+                        shift, chebyshev, shapes})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

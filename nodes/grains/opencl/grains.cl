@@ -992,6 +992,75 @@ __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __g
   if (gr_sleep_stay(&sp, &s, k, P, v))
     contacts[k] = offsets ? (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_NEAR) : 0;
 }
+#include "shapes.h"
+
+/* rigid shape matching (kernels/shapes.h, in double precision), a work-group of GR_SHAPE_LANES
+ * work-items a component (its lanes), in place after a pass and before the pins: each
+ * component's fit, shift out of its collider planes and friction with them, the stages and folds
+ * of shapes.cpp in its order, a barrier between them (a component's members are its own) */
+#define GR_SHAPE_SYNC barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE)
+__kernel __attribute__((reqd_work_group_size(GR_SHAPE_LANES, 1, 1))) void gr_k_shapes(
+    gr_params prm, GR_GRAINS_ARGS, __global float* p, __global const gr_uint* offsets,
+    __global const gr_uint* members, __global const float* rest, __global const float* shape_mass,
+    __global float* collider_normal, int components) {
+  __local double parts[GR_SHAPE_LANES * GR_SHAPE_ROW];
+  __local double rot[9], motion[6];
+  const gr_uint c = (gr_uint)get_group_id(0);
+  const int l = (int)get_local_id(0);
+  const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+  double means[6], centre[3];
+  gr_shapes s;
+  if ((int)c >= components) return; /* the whole group */
+  s.offsets = offsets;
+  s.members = members;
+  s.rest = rest;
+  s.mass = shape_mass;
+  s.collider_normal = collider_normal;
+  gr_shape_mass_lane(&s, p, c, l, parts);
+  GR_SHAPE_SYNC;
+  if (l == 0) gr_shape_fold_sum(parts, 7);
+  GR_SHAPE_SYNC;
+  gr_shape_means(parts, means);
+  GR_SHAPE_SYNC;
+  gr_shape_fit_lane(&s, p, c, l, means, parts);
+  GR_SHAPE_SYNC;
+  if (l == 0) gr_shape_fold_sum(parts, 9);
+  GR_SHAPE_SYNC;
+  if (l == 0) gr_shape_fit_rotation(parts, rot);
+  GR_SHAPE_SYNC;
+  gr_shape_goal_lane(&s, p, c, l, means, rot);
+  if (!g.plane_offsets) return;
+  GR_SHAPE_SYNC;
+  gr_shape_shift_lane(&s, &g, &prm, p, c, l, parts);
+  GR_SHAPE_SYNC;
+  if (l == 0) gr_shape_fold_bounds(parts);
+  GR_SHAPE_SYNC;
+  gr_shape_shift_apply(&s, p, c, l, parts);
+  if (!collider_normal || !(prm.friction_with_colliders > 0.0f)) return;
+  GR_SHAPE_SYNC;
+  gr_shape_body_lane(&s, &g, p, c, l, parts);
+  GR_SHAPE_SYNC;
+  if (l == 0) gr_shape_fold_sum(parts, 5);
+  GR_SHAPE_SYNC;
+  if (!(parts[4] > 0.0)) return; /* no contact touching: the whole group */
+  {
+    const double mass = parts[3];
+    gr_shape_centre(parts, centre);
+    GR_SHAPE_SYNC;
+    gr_shape_inertia_lane(&s, p, c, l, centre, parts);
+    GR_SHAPE_SYNC;
+    if (l == 0) gr_shape_fold_sum(parts, 9);
+    GR_SHAPE_SYNC;
+    if (l == 0) {
+      double out[6];
+      int r;
+      gr_shape_friction(&s, &g, &prm, p, c, centre, mass, parts, out);
+      for (r = 0; r < 6; ++r) motion[r] = out[r];
+    }
+    GR_SHAPE_SYNC;
+    gr_shape_friction_apply(&s, p, c, l, centre, motion);
+  }
+}
 #endif
 
 /* An exclusive prefix sum of n counts, in place, with the total at [n]: gr_k_scan_blocks sums

@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "nodes/grains/kernels/shapes.h"
 #include "nodes/grains/opencl/device.h"
 #include "nodes/grains/opencl/device_state.h"
 
@@ -235,6 +236,11 @@ const std::string& Iterations::device_name() const {
 
 bool Iterations::shares_blocks() const {
   return impl_->sweep_items > 1;
+}
+
+bool Iterations::shapes_there() {
+  impl_->open_neighbours();  // the program has gr_k_shapes where it has the grid's kernels
+  return impl_->bounds != nullptr;
 }
 
 bool Iterations::builds_contacts() const {
@@ -546,6 +552,30 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
   const PartArgs at{kFirstOwn + 1, kFirstOwn + 4, kFirstOwn + 5, kFirstOwn + 7};
   const bool pins = g.targetP && g.targetstiffness;
   if (pins) set_pins(g, prm, n);
+  // the shapes: prm, g's arrays, p, the components' arrays, the normal sums, their count
+  const SequentialContacts::Shapes* sh = s.shapes && s.shapes->components > 0 ? s.shapes : nullptr;
+  static_assert(kGroup == GR_SHAPE_LANES, "a component's lanes are one work-group");
+  const size_t shape_items = sh ? sh->components * kGroup : 0;  // a work-group a component
+  if (sh) {
+    kernel(shapes, "gr_k_shapes");
+    const size_t f = sizeof(float), u = sizeof(gr_uint);
+    if (sh->generation == 0 || sh->generation != shape_generation || shape_grains != n) {
+      upload(shape_offsets, sh->offsets, (sh->components + 1) * u);
+      upload(shape_members, sh->members, sh->offsets[sh->components] * u);
+      upload(shape_rest, sh->rest, 3 * n * f);
+      shape_generation = sh->generation;
+      shape_grains = n;
+    }
+    upload_once(shape_mass, sh->mass, n * f);
+    if (sh->collider_normal) upload(shape_normal, sh->collider_normal, sh->entries * f);
+    set_grains(shapes, prm, g, inputs);
+    set_buffer(shapes, kFirstOwn + 1, &shape_offsets);
+    set_buffer(shapes, kFirstOwn + 2, &shape_members);
+    set_buffer(shapes, kFirstOwn + 3, &shape_rest);
+    set_buffer(shapes, kFirstOwn + 4, &shape_mass);
+    set_buffer(shapes, kFirstOwn + 5, sh->collider_normal ? &shape_normal : nullptr);
+    arg(shapes, kFirstOwn + 6, static_cast<int>(sh->components));
+  }
   for (int it = 0; it < iterations; ++it) {
     if (s.others) {
       set_buffer(others, kFirstOwn, from);
@@ -556,8 +586,16 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
     }
     set_buffer(sequential, kFirstOwn, from);
     for (size_t c = 0; c < s.colours && s.count > 0; ++c) sweep_colour(sequential, at, s, c);
+    if (sh) {
+      set_buffer(shapes, kFirstOwn, from);
+      check(clEnqueueNDRangeKernel(queue, shapes, 1, nullptr, &shape_items, &local, 0, nullptr,
+                                   nullptr),
+            "clEnqueueNDRangeKernel");
+    }
     if (pins) project_pins(from, global);
   }
+  if (sh && sh->collider_normal)
+    download(shape_normal, sh->collider_normal, sh->entries * sizeof(float));
   return from;
 }
 

@@ -99,6 +99,24 @@ struct SequentialContacts {
   bool there = false;
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;
+  // rigid shape matching after each pass's contacts and before its pins (kernels/shapes.h,
+  // gr_k_shapes, a work-group a component), on a device with double precision (shapes_there()):
+  // `components` components of offsets (components + 1) and members, each grain's rest offset
+  // (3 n) and mass (n), and, when set, the collider planes' normal sums
+  // (a float an entry of g's planes, `entries`), sent and brought back each call. Null: none.
+  // generation (above 0): the components and rest offsets are those the last call of the same
+  // generation sent, which stay there (mass goes up once a substep)
+  struct Shapes {
+    const gr_uint* offsets = nullptr;
+    const gr_uint* members = nullptr;
+    size_t components = 0;
+    const float* rest = nullptr;
+    const float* mass = nullptr;
+    uint64_t generation = 0;
+    float* collider_normal = nullptr;
+    size_t entries = 0;
+  };
+  const Shapes* shapes = nullptr;
 };
 
 // The substep's end on the device after its passes (gr_k_finish: gr_update_velocity; run() and
@@ -461,6 +479,9 @@ class Iterations {
   // whether gauss_seidel's contact list may be built here (build_sequential), which
   // GRAINS_OPENCL_HOST_CONTACTS=1 refuses
   bool builds_contacts() const;
+  // whether the device projects rigid shapes (SequentialContacts::shapes): it has double
+  // precision
+  bool shapes_there();
 
  private:
   struct Impl;

@@ -371,10 +371,10 @@ TEST_CASE(
     "use_opencl: with rigid shapes the device's gauss_seidel passes give the grains outside them "
     "the bits they give without",
     "[opencl][gauss_seidel][shape]") {
-  // With rigid shape matching each pass is a device call of its own (the host projects the
-  // shapes between them), started from pre-stabilization's start, which the solve before them
-  // brings back; without shapes the passes run within that solve. For grains in no shape the
-  // two are the same operations on the same values: the same bits. The settled block squeezed
+  // With rigid shape matching the device projects the shapes after each pass (gr_k_shapes, a
+  // work-group a component, which writes only the components' grains), within the solve that
+  // runs the passes without shapes too. For grains in no shape the two are the same operations
+  // on the same values: the same bits. The settled block squeezed
   // to 97% of its height (overlaps of about 0.06 r between layers, which pre-stabilization
   // removes from the start), with friction on (friction reads the start: a grain's slip is
   // measured from it), one substep, once with a rigid pair far above it (connected, so that

@@ -464,20 +464,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     gd.P = start;  // the device pre-stabilizes its own copy of the start
     if (!others.nbr_offsets) gd.nbr_offsets = gd.nbr_indices = nullptr, size.pair_entries = 0;
     // the shapes after each pass there too, where the device can (double precision)
-    opencl::SequentialContacts::Shapes shapes;
+    opencl::ShapeArrays shapes;
     const bool shapes_there = c.shapes_on && !c.shapes_here;
-    if (shapes_there) {
-      const gr_shapes sh = shape_arrays(prm);
-      shapes.offsets = sh.offsets;
-      shapes.members = sh.members;
-      shapes.components = comp_offsets_.size() - 1;
-      shapes.rest = sh.rest;
-      shapes.mass = sh.mass;
-      shapes.generation = shape_generation_;
-      shapes.entries = sh.collider_normal ? collider_normal_.size() : 0;
-      shapes.collider_normal = shapes.entries > 0 ? collider_normal_.data() : nullptr;
-      on.shapes = &shapes;
-    }
+    if (shapes_there) on.shapes = shape_arrays_there(c, &shapes);
     if (!c.shapes_on || shapes_there) {
       // the substep's end there too (write_back takes what it wrote), unless the host reads the
       // passes' positions: for the impact data

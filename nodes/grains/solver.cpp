@@ -289,6 +289,21 @@ void GrainsSolver::project_shapes(const gr_grains& g, const gr_params& prm, int 
   project_components(shape_arrays(prm), gs, prm, p_.data(), comp_offsets_.size() - 1, threads);
 }
 
+// the shapes as a device projects them (opencl::ShapeArrays), into *out
+const opencl::ShapeArrays* GrainsSolver::shape_arrays_there(const SubstepContext& c,
+                                                            opencl::ShapeArrays* out) {
+  const gr_shapes sh = shape_arrays(c.prm);
+  out->offsets = sh.offsets;
+  out->members = sh.members;
+  out->components = comp_offsets_.size() - 1;
+  out->rest = sh.rest;
+  out->mass = sh.mass;
+  out->generation = shape_generation_;
+  out->entries = sh.collider_normal ? collider_normal_.size() : 0;
+  out->collider_normal = out->entries > 0 ? collider_normal_.data() : nullptr;
+  return out;
+}
+
 gr_shapes GrainsSolver::shape_arrays(const gr_params& prm) {
   gr_shapes s;
   s.offsets = comp_offsets_.data();
@@ -698,8 +713,10 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   // rigid shape matching: its components and rest shapes (build_shapes)
   c.shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
   if (c.shapes_on) build_shapes(d);
-  c.shapes_here = c.shapes_on && !(s.use_opencl && s.contact_solver == kContactGaussSeidel &&
-                                   open_device().shapes_there());
+  c.shapes_here =
+      c.shapes_on && !(s.use_opencl && !s.host_shapes &&
+                       (s.contact_solver == kContactGaussSeidel || jacobi_loop_there(s)) &&
+                       open_device().shapes_there());
 
   // explicit constraints (c.constraints_on above)
   if (c.constraints_on) {
@@ -1270,8 +1287,12 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 }
 
 bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
-  const GrainsSettings& s = c.s;
-  return s.use_opencl && s.contact_solver != kContactGaussSeidel && !c.shapes_on &&
+  return jacobi_loop_there(c.s) && !c.shapes_here;
+}
+
+// jacobi_whole but for the shapes, which the device then projects too where it can
+bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s) {
+  return s.use_opencl && s.contact_solver != kContactGaussSeidel &&
          !(chebyshev_steps(s) && s.host_chebyshev) && !s.update_neighbors_during_iterations &&
          !s.update_collisions_during_iterations;
 }
@@ -1283,12 +1304,12 @@ bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
 // use_opencl with jacobi: the substep's prediction, pre-stabilization, iterations and end chained
 // on the device, the positions staying there between them (its end comes back, or stays, as
 // gauss_seidel's does; carry_start takes the next start from it), where nothing between them
-// runs here: no rigid shapes, no rows or planes found again during the iterations
+// runs here: no rigid shapes projected here, no rows or planes found again during the iterations
 // (jacobi_whole; Chebyshev's step is made there too), no impact data (its momenta read the passes'
 // sums and positions here), no contact history made here (host_history), and none of the test
 // switches send_history_p, host_predict and host_finish.
 bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
-  return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_on &&
+  return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_here &&
          !(c.d.impact_impulse && c.colliders_on);
 }
 
@@ -1401,6 +1422,8 @@ void GrainsSolver::iterate(SubstepContext& c) {
     if (w.p_there) w.finish = finish_there(c, &end);
   }
   if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
+  opencl::ShapeArrays shapes;
+  if (device_whole && c.shapes_on) w.shapes = shape_arrays_there(c, &shapes);
   if (device_whole)
     device_passes(c, w.p_there ? p_.data() : host_p(c), iterations, false, true, &w);
   device_.p_there = device_whole;  // nothing here changes p_ before the history's save

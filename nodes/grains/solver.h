@@ -28,6 +28,7 @@ struct IterationSizes;
 struct SequentialContacts;
 struct SubstepEnd;
 struct JacobiSolve;
+struct ShapeArrays;
 struct Traffic;
 }
 
@@ -107,6 +108,10 @@ struct GrainsSettings {
   // device call of its own, even where the device's whole call of them makes it
   // (GrainsSolver::jacobi_whole; the tests compare the two)
   bool host_chebyshev = false;
+  // use_opencl: rigid shapes projected on the host between the passes, each a device call of
+  // its own, even where the device projects them (SubstepContext::shapes_here; the tests compare
+  // the two)
+  bool host_shapes = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -591,8 +596,12 @@ class GrainsSolver {
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;
   // use_opencl with jacobi: the iterations are one device call, nothing between them here (no
-  // rigid shapes, no rows or planes found again during them; Chebyshev's step made there)
+  // rigid shapes projected here, no rows or planes found again during them; Chebyshev's step
+  // made there)
   bool jacobi_whole(const SubstepContext& c) const;
+  static bool jacobi_loop_there(const GrainsSettings& s);
+  // the shapes as a device projects them (shape_arrays), into *out
+  const opencl::ShapeArrays* shape_arrays_there(const SubstepContext& c, opencl::ShapeArrays* out);
   // ... and this substep's collider planes may stay there: no stage here reads them (no impact
   // data, the contact history made there)
   bool jacobi_planes_stay(const SubstepContext& c) const;

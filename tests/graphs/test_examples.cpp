@@ -501,8 +501,8 @@ TEST_CASE("with the Jacobi path, rigid_rocks stay rigid and tumble", "[graphs][s
 }
 
 TEST_CASE("use_opencl: rigid_rocks stay rigid and tumble on the OpenCL device", "[graphs][shape][opencl]") {
-  // each pass on PoCL's CPU device, the shape matching on the host between them, with the
-  // contacts one at a time (the default) and with the Jacobi average: the same bounds
+  // each pass on PoCL's CPU device and the shape matching there after it (gr_k_shapes), with
+  // the contacts one at a time (the default) and with the Jacobi average: the same bounds
   check_rigid_rocks({"use_opencl=true"});
   check_rigid_rocks({"use_opencl=true", "contact_solver=jacobi"});
 }

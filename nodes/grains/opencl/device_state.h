@@ -441,6 +441,11 @@ struct Iterations::Impl {
   // the pins' arguments (g.targetP and its arrays uploaded), and one pin projection of x
   void set_pins(const gr_grains& g, const gr_params& prm, size_t n);
   void project_pins(Buffer* x, size_t global);
+  // the shapes' arguments (their arrays uploaded where they are not there; normal: the normal
+  // sums' buffer, null: none), and one projection of x
+  void set_shapes(const ShapeArrays& sh, const gr_params& prm, const gr_grains& g,
+                  const HostArray* inputs, Buffer* normal, size_t n);
+  void project_shapes(Buffer* x, size_t components);
   // hist_table: each id of the n grains now (id, null: their indices) at its grain's index in
   // the last substep's hist_n (hist_id, below table_size), once a substep (table_made)
   void history_table(size_t n, const int* id, const int* hist_id, size_t hist_n,

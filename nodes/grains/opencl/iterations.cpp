@@ -316,6 +316,36 @@ void Iterations::Impl::project_pins(Buffer* x, size_t global) {
         "clEnqueueNDRangeKernel");
 }
 
+void Iterations::Impl::set_shapes(const ShapeArrays& sh, const gr_params& prm, const gr_grains& g,
+                                  const HostArray* inputs, Buffer* normal, size_t n) {
+  kernel(shapes, "gr_k_shapes");
+  const size_t f = sizeof(float), u = sizeof(gr_uint);
+  if (sh.generation == 0 || sh.generation != shape_generation || shape_grains != n) {
+    upload(shape_offsets, sh.offsets, (sh.components + 1) * u);
+    upload(shape_members, sh.members, sh.offsets[sh.components] * u);
+    upload(shape_rest, sh.rest, 3 * n * f);
+    shape_generation = sh.generation;
+    shape_grains = n;
+  }
+  upload_once(shape_mass, sh.mass, n * f);
+  // prm, g's arrays, p (project_shapes), the components' arrays, the normal sums, their count
+  set_grains(shapes, prm, g, inputs);
+  set_buffer(shapes, kFirstOwn + 1, &shape_offsets);
+  set_buffer(shapes, kFirstOwn + 2, &shape_members);
+  set_buffer(shapes, kFirstOwn + 3, &shape_rest);
+  set_buffer(shapes, kFirstOwn + 4, &shape_mass);
+  set_buffer(shapes, kFirstOwn + 5, normal);
+  arg(shapes, kFirstOwn + 6, static_cast<int>(sh.components));
+}
+
+void Iterations::Impl::project_shapes(Buffer* x, size_t components) {
+  static_assert(kGroup == GR_SHAPE_LANES, "a component's lanes are one work-group");
+  const size_t local = kGroup, items = components * kGroup;  // a work-group a component
+  set_buffer(shapes, kFirstOwn, x);
+  check(clEnqueueNDRangeKernel(queue, shapes, 1, nullptr, &items, &local, 0, nullptr, nullptr),
+        "clEnqueueNDRangeKernel");
+}
+
 void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
                      const gr_normal_sums& acc, int iterations, bool friction_pass,
                      bool accurate_friction, const JacobiSolve& w) {
@@ -374,6 +404,10 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   // pins (g.targetstiffness set): their own group after each iteration, in place, on `from`
   const bool pins = g.targetP && g.targetstiffness;
   if (pins) m.set_pins(g, prm, n);
+  // the shapes, in place on `from` after each iteration and each friction pass, their normal
+  // sums the iterations' collider sums
+  const ShapeArrays* sh = w.shapes && w.shapes->components > 0 ? w.shapes : nullptr;
+  if (sh) m.set_shapes(*sh, prm, g, inputs, acc.collider ? &m.collider_sum : nullptr, n);
   // Chebyshev: the iterate before the last in `before` (x_{-1} = x_0: the first steps are plain
   // Jacobi), which the step makes the next; the three buffers then turn
   const bool chebyshev = w.chebyshev_rho > 0.0f;
@@ -405,10 +439,17 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
     } else {
       pass(m.iterate);
     }
-    if (friction_pass && accurate_friction) pass(m.friction);
+    if (sh) m.project_shapes(from, sh->components);
+    if (friction_pass && accurate_friction) {
+      pass(m.friction);
+      if (sh) m.project_shapes(from, sh->components);
+    }
     if (pins) m.project_pins(from, global);
   }
-  if (friction_pass && !accurate_friction) pass(m.friction);
+  if (friction_pass && !accurate_friction) {
+    pass(m.friction);
+    if (sh) m.project_shapes(from, sh->components);
+  }
 
   if (w.finish)
     m.finish_substep(g, prm, inputs, from, *w.finish, false,
@@ -552,30 +593,11 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
   const PartArgs at{kFirstOwn + 1, kFirstOwn + 4, kFirstOwn + 5, kFirstOwn + 7};
   const bool pins = g.targetP && g.targetstiffness;
   if (pins) set_pins(g, prm, n);
-  // the shapes: prm, g's arrays, p, the components' arrays, the normal sums, their count
-  const SequentialContacts::Shapes* sh = s.shapes && s.shapes->components > 0 ? s.shapes : nullptr;
-  static_assert(kGroup == GR_SHAPE_LANES, "a component's lanes are one work-group");
-  const size_t shape_items = sh ? sh->components * kGroup : 0;  // a work-group a component
-  if (sh) {
-    kernel(shapes, "gr_k_shapes");
-    const size_t f = sizeof(float), u = sizeof(gr_uint);
-    if (sh->generation == 0 || sh->generation != shape_generation || shape_grains != n) {
-      upload(shape_offsets, sh->offsets, (sh->components + 1) * u);
-      upload(shape_members, sh->members, sh->offsets[sh->components] * u);
-      upload(shape_rest, sh->rest, 3 * n * f);
-      shape_generation = sh->generation;
-      shape_grains = n;
-    }
-    upload_once(shape_mass, sh->mass, n * f);
-    if (sh->collider_normal) upload(shape_normal, sh->collider_normal, sh->entries * f);
-    set_grains(shapes, prm, g, inputs);
-    set_buffer(shapes, kFirstOwn + 1, &shape_offsets);
-    set_buffer(shapes, kFirstOwn + 2, &shape_members);
-    set_buffer(shapes, kFirstOwn + 3, &shape_rest);
-    set_buffer(shapes, kFirstOwn + 4, &shape_mass);
-    set_buffer(shapes, kFirstOwn + 5, sh->collider_normal ? &shape_normal : nullptr);
-    arg(shapes, kFirstOwn + 6, static_cast<int>(sh->components));
-  }
+  // the shapes, their normal sums sent here and brought back after the passes
+  const ShapeArrays* sh = s.shapes && s.shapes->components > 0 ? s.shapes : nullptr;
+  if (sh && sh->collider_normal)
+    upload(shape_normal, sh->collider_normal, sh->entries * sizeof(float));
+  if (sh) set_shapes(*sh, prm, g, inputs, sh->collider_normal ? &shape_normal : nullptr, n);
   for (int it = 0; it < iterations; ++it) {
     if (s.others) {
       set_buffer(others, kFirstOwn, from);
@@ -586,12 +608,7 @@ Buffer* Iterations::Impl::sequential_passes(const gr_grains& g, const gr_params&
     }
     set_buffer(sequential, kFirstOwn, from);
     for (size_t c = 0; c < s.colours && s.count > 0; ++c) sweep_colour(sequential, at, s, c);
-    if (sh) {
-      set_buffer(shapes, kFirstOwn, from);
-      check(clEnqueueNDRangeKernel(queue, shapes, 1, nullptr, &shape_items, &local, 0, nullptr,
-                                   nullptr),
-            "clEnqueueNDRangeKernel");
-    }
+    if (sh) project_shapes(from, sh->components);
     if (pins) project_pins(from, global);
   }
   if (sh && sh->collider_normal)

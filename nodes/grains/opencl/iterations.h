@@ -58,6 +58,25 @@ struct IterationSizes {
   bool plane_slips_there = false, collider_sums_stay = false;
 };
 
+// Rigid shape matching on the device (kernels/shapes.h, gr_k_shapes, a work-group a
+// component), on a device with double precision (Iterations::shapes_there()): `components`
+// components of offsets (components + 1) and members, each grain's rest offset (3 n) and mass
+// (n), and, when set, the collider planes' normal sums (a float an entry of g's planes,
+// `entries`; with gauss_seidel sent and brought back each call, with jacobi the iterations'
+// collider sums, acc.collider, which the device holds). generation (above 0): the components
+// and rest offsets are those the last call of the same generation sent, which stay there (mass
+// goes up once a substep).
+struct ShapeArrays {
+  const gr_uint* offsets = nullptr;
+  const gr_uint* members = nullptr;
+  size_t components = 0;
+  const float* rest = nullptr;
+  const float* mass = nullptr;
+  uint64_t generation = 0;
+  float* collider_normal = nullptr;
+  size_t entries = 0;
+};
+
 // contact_solver gauss_seidel's contacts in blocks and colours (GrainsSolver::colour_blocks)
 // and waves (GrainsSolver::order_waves): block b's contacts are contacts[block_start[b],
 // block_start[b + 1]), colour c's blocks colour_blocks[colour_start[c], colour_start[c + 1]);
@@ -99,24 +118,9 @@ struct SequentialContacts {
   bool there = false;
   const gr_grains* others = nullptr;
   const gr_params* others_prm = nullptr;
-  // rigid shape matching after each pass's contacts and before its pins (kernels/shapes.h,
-  // gr_k_shapes, a work-group a component), on a device with double precision (shapes_there()):
-  // `components` components of offsets (components + 1) and members, each grain's rest offset
-  // (3 n) and mass (n), and, when set, the collider planes' normal sums
-  // (a float an entry of g's planes, `entries`), sent and brought back each call. Null: none.
-  // generation (above 0): the components and rest offsets are those the last call of the same
-  // generation sent, which stay there (mass goes up once a substep)
-  struct Shapes {
-    const gr_uint* offsets = nullptr;
-    const gr_uint* members = nullptr;
-    size_t components = 0;
-    const float* rest = nullptr;
-    const float* mass = nullptr;
-    uint64_t generation = 0;
-    float* collider_normal = nullptr;
-    size_t entries = 0;
-  };
-  const Shapes* shapes = nullptr;
+  // rigid shape matching after each pass's contacts and before its pins (ShapeArrays; null:
+  // none)
+  const ShapeArrays* shapes = nullptr;
 };
 
 // The substep's end on the device after its passes (gr_k_finish: gr_update_velocity; run() and
@@ -177,6 +181,9 @@ struct JacobiSolve {
   // above 0: Chebyshev's step after each iteration (kernels/iterate.h, gr_chebyshev_omega with
   // this rho), made there
   float chebyshev_rho = 0.0f;
+  // rigid shape matching after each iteration and after each friction pass, before the pins
+  // (ShapeArrays, its normal sums acc.collider; null: none)
+  const ShapeArrays* shapes = nullptr;
 };
 
 // What crosses between the host and the device: bytes each way, and the transfers that carried

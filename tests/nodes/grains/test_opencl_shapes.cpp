@@ -46,6 +46,34 @@ M3 reference(const M3& A) {
   return U * svd.matrixV().transpose();
 }
 
+// A cube of 10 x 10 x 10 touching grains (r = 5 cm) joined to their +x, +y, +z neighbours
+// (shape matching's connectivity; explicit constraint weight 0), tilted 20 and 10 degrees, its
+// lowest grain about 10 cm above the ground, collider friction on, 8 x 10 at 24 fps
+test::Scene tilted_cube() {
+  test::Scene sc;
+  sc.s = test::settings(24, 8, 10);
+  sc.s.enable_rigid_shape_matching = true;
+  sc.s.explicit_constraints_weight = 0;
+  sc.s.friction_with_colliders = 1;
+  sc.add_collider(test::ground());
+  const float r = 0.05f;
+  const int m = 10;
+  const Pose tilt = Pose::from_trs({0, 0.1f + 0.9f, 0}, {20, 0, 10}, 1.0f);
+  auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b)
+      for (int c = 0; c < m; ++c)
+        sc.add(tilt.apply({(a - 4.5f) * 2 * r, (b - 4.5f) * 2 * r, (c - 4.5f) * 2 * r}), r);
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b)
+      for (int c = 0; c < m; ++c) {
+        if (a + 1 < m) sc.connect(index(a, b, c), index(a + 1, b, c));
+        if (b + 1 < m) sc.connect(index(a, b, c), index(a, b + 1, c));
+        if (c + 1 < m) sc.connect(index(a, b, c), index(a, b, c + 1));
+      }
+  return sc;
+}
+
 }  // namespace
 
 TEST_CASE("the fit's rotation is the polar decomposition's, flat, straight and mirrored ones too",
@@ -193,7 +221,7 @@ TEST_CASE("use_opencl: the device projects rigid shapes as the host does, bit fo
   s.block_start = &zero;
   s.block_wave = &zero;
   s.wave_start = &zero;
-  opencl::SequentialContacts::Shapes shapes;
+  opencl::ShapeArrays shapes;
   shapes.offsets = offsets.data();
   shapes.members = members.data();
   shapes.components = sizes.size();
@@ -212,42 +240,21 @@ TEST_CASE("use_opencl: the device projects rigid shapes as the host does, bit fo
 
 TEST_CASE("use_opencl: with rigid shapes on the device a substep's passes do not cross",
           "[opencl][shape][gauss_seidel]") {
-  // A cube of 10 x 10 x 10 touching grains joined to their neighbours (shape matching's
-  // connectivity; explicit constraint weight 0), tilted and landing on the ground with collider
-  // friction, on the device until it stands there (its lowest grain within half a radius of
-  // resting). The shapes are projected there after each pass (gr_k_shapes), so the contact
-  // list is built and kept there as without shapes, and the components and rest offsets stay
-  // there while they hold (Shapes::generation). Four more substeps: each sends under 1 KiB (the
-  // colliders, the force, flags) and receives the written positions and velocities (24 B a
-  // grain), its reductions' partial results (61,440 B, as in "what crosses between the host and
-  // the device each substep") and under 4 KiB more. Projecting them on the host had each
-  // pass's positions cross both ways (12 B a grain a pass each way), the list built on the host
-  // sent and brought back (56 B a contact), and the shapes' arrays sent each substep (16 B a
-  // grain). Then one more substep from that state (a copy of the scene, which sends its arrays
-  // first) with 5 passes and with 20: the traffic does not grow with the passes (the two differ
-  // by under 4 KiB each way, a pass's flags and largest moves).
-  test::Scene sc;
-  sc.s = test::settings(24, 8, 10);
+  // The tilted cube (tilted_cube) landing on the ground, on the device until it stands there (its
+  // lowest grain within half a radius of resting). The shapes are projected there after each pass
+  // (gr_k_shapes), so the contact list is built and kept there as without shapes, and the
+  // components and rest offsets stay there while they hold (ShapeArrays::generation). Four more
+  // substeps: each sends under 1 KiB (the colliders, the force, flags) and receives the written
+  // positions and velocities (24 B a grain), its reductions' partial results (61,440 B, as in "what
+  // crosses between the host and the device each substep") and under 4 KiB more. Projecting them on
+  // the host had each pass's positions cross both ways (12 B a grain a pass each way), the list
+  // built on the host sent and brought back (56 B a contact), and the shapes' arrays sent each
+  // substep (16 B a grain). Then one more substep from that state (a copy of the scene, which sends
+  // its arrays first) with 5 passes and with 20: the traffic does not grow with the passes (the two
+  // differ by under 4 KiB each way, a pass's flags and largest moves).
+  test::Scene sc = tilted_cube();
   sc.s.use_opencl = true;
-  sc.s.enable_rigid_shape_matching = true;
-  sc.s.explicit_constraints_weight = 0;
-  sc.s.friction_with_colliders = 1;
-  sc.add_collider(test::ground());
   const float r = 0.05f;
-  const int m = 10;
-  const Pose tilt = Pose::from_trs({0, 0.1f + 0.9f, 0}, {20, 0, 10}, 1.0f);
-  auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c)
-        sc.add(tilt.apply({(a - 4.5f) * 2 * r, (b - 4.5f) * 2 * r, (c - 4.5f) * 2 * r}), r);
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c) {
-        if (a + 1 < m) sc.connect(index(a, b, c), index(a + 1, b, c));
-        if (b + 1 < m) sc.connect(index(a, b, c), index(a, b + 1, c));
-        if (c + 1 < m) sc.connect(index(a, b, c), index(a, b, c + 1));
-      }
   const double n = double(sc.size());
   float lowest = 1e9f;
   for (int k = 0; k < 120 && lowest > 1.5f * r; ++k) {
@@ -281,4 +288,43 @@ TEST_CASE("use_opencl: with rigid shapes on the device a substep's passes do not
                          << " B, received " << received20);
   CHECK(std::fabs(sent20 - sent5) < 4096);
   CHECK(std::fabs(received20 - received5) < 4096);
+}
+
+TEST_CASE("use_opencl: rigid shapes projected on the device give the host's projection's bits",
+          "[opencl][shape]") {
+  // The tilted cube landing on the ground and settling, 60 substeps, on the device with the
+  // shapes projected there (after each pass within the solve; with jacobi within the one call of
+  // its iterations, after each iteration and the friction pass) and with them projected on the
+  // host between passes each a device call of its own (host_shapes): the same functions on the
+  // same floats, so the same positions and velocities, bit for bit, every substep. Both solvers;
+  // jacobi with its friction pass once and after each iteration, and with Chebyshev's step.
+  struct Variant {
+    const char* name;
+    int solver;
+    bool accurate;
+    float rho;
+  };
+  for (const Variant& v : {Variant{"gauss_seidel", kContactGaussSeidel, false, 0.0f},
+                           Variant{"jacobi", kContactJacobi, false, 0.0f},
+                           Variant{"jacobi, accurate friction", kContactJacobi, true, 0.0f},
+                           Variant{"jacobi, Chebyshev", kContactJacobi, false, 0.9f}}) {
+    INFO(v.name);
+    test::Scene there = tilted_cube();
+    there.s.use_opencl = true;
+    there.s.contact_solver = v.solver;
+    there.s.accurate_friction = v.accurate;
+    there.s.chebyshev_rho = v.rho;
+    test::Scene here = there;
+    here.s.host_shapes = true;
+    int differ = 0;
+    for (int k = 0; k < 60; ++k) {
+      there.substep();
+      here.substep();
+      differ += there.P != here.P || there.v != here.v;
+    }
+    CHECK(differ == 0);
+    float lowest = 1e9f;
+    for (size_t i = 0; i < there.size(); ++i) lowest = std::min(lowest, there.pos(i).y);
+    CHECK(lowest < 0.075f);  // the premise: it landed (the shift and the friction acted)
+  }
 }

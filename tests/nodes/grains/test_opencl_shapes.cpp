@@ -46,31 +46,14 @@ M3 reference(const M3& A) {
   return U * svd.matrixV().transpose();
 }
 
-// A cube of 10 x 10 x 10 touching grains (r = 5 cm) joined to their +x, +y, +z neighbours
-// (shape matching's connectivity; explicit constraint weight 0), tilted 20 and 10 degrees, its
-// lowest grain about 10 cm above the ground, collider friction on, 8 x 10 at 24 fps
+// test::connected_cube, its lowest grain about 10 cm above the ground, shape matching and
+// collider friction on, 8 x 10 at 24 fps
 test::Scene tilted_cube() {
-  test::Scene sc;
+  test::Scene sc = test::connected_cube(0.1f);
   sc.s = test::settings(24, 8, 10);
-  sc.s.enable_rigid_shape_matching = true;
   sc.s.explicit_constraints_weight = 0;
+  sc.s.enable_rigid_shape_matching = true;
   sc.s.friction_with_colliders = 1;
-  sc.add_collider(test::ground());
-  const float r = 0.05f;
-  const int m = 10;
-  const Pose tilt = Pose::from_trs({0, 0.1f + 0.9f, 0}, {20, 0, 10}, 1.0f);
-  auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c)
-        sc.add(tilt.apply({(a - 4.5f) * 2 * r, (b - 4.5f) * 2 * r, (c - 4.5f) * 2 * r}), r);
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c) {
-        if (a + 1 < m) sc.connect(index(a, b, c), index(a + 1, b, c));
-        if (b + 1 < m) sc.connect(index(a, b, c), index(a, b + 1, c));
-        if (c + 1 < m) sc.connect(index(a, b, c), index(a, b, c + 1));
-      }
   return sc;
 }
 

@@ -1,7 +1,8 @@
 /* Rigid shape matching (help page "Rigid Shape Matching"; Müller et al. 2005, "Meshless
  * deformations based on shape matching"; pbd_research.md §1), a component at a time: the fit
  * that moves every member to its goal, the shift out of the collider planes and the body's
- * friction with them (gr_shape_* below, in the order gr_shape_project lists them).
+ * friction with them (the stages gr_shape_* below, numbered in the order shapes.cpp and
+ * gr_k_shapes run them).
  *
  * A component's work is shared among GR_SHAPE_LANES lanes: lane l takes members b + l,
  * b + l + LANES, ... (b the component's first), writes its partial sums to its row of `parts`

@@ -1478,8 +1478,8 @@ void GrainsSolver::iterate(SubstepContext& c) {
 
 // Rigid shape matching's components: the connected components of the 2-point primitives
 // (union-find) and their rest offsets, rebuilt from the start positions d.P whenever the grains
-// or the primitives change (first seen, births, deaths, broken constraints); otherwise the stored
-// rest offsets are kept.
+// or the primitives change (first seen, births, deaths, broken constraints); the same grains in
+// another order keep their rest offsets by id; otherwise the stored rest offsets are kept.
 void GrainsSolver::build_shapes(const GrainsData& d) {
   const size_t n = d.n;
   std::vector<int32_t> key;
@@ -1491,6 +1491,21 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
     key.push_back(a >= 0 && static_cast<size_t>(a) < n ? key[1 + a] : -1);
   }
   if (key != shape_key_) {
+    // the same grains (unique ids) and primitives in another order (the node sorts its grains
+    // by cell each frame): each grain keeps its rest offset, found by its id, rather than
+    // having its rest shape taken again from where the grains are now
+    std::vector<std::pair<int32_t, uint32_t>> was;  // (id, index in the last order), by id
+    if (d.id && shape_key_.size() == key.size() && shape_key_[0] == key[0] &&
+        std::equal(key.begin() + 1 + n, key.end(), shape_key_.begin() + 1 + n)) {
+      std::vector<int32_t> ids(key.begin() + 1, key.begin() + 1 + n);
+      for (size_t i = 0; i < n; ++i) was.push_back({shape_key_[1 + i], static_cast<uint32_t>(i)});
+      std::sort(was.begin(), was.end());
+      std::sort(ids.begin(), ids.end());
+      bool same = std::adjacent_find(ids.begin(), ids.end()) == ids.end();
+      for (size_t i = 0; same && i < n; ++i) same = was[i].first == ids[i];
+      if (!same) was.clear();
+    }
+    const std::vector<float> was_rest = was.empty() ? std::vector<float>() : rest_offset_;
     shape_key_.swap(key);
     ++shape_generation_;
     std::vector<int32_t> parent(n);
@@ -1520,6 +1535,14 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
     }
     // rest offsets from the mass-weighted centre of each component
     rest_offset_.assign(3 * n, 0.0f);
+    if (!was.empty()) {
+      for (size_t i = 0; i < n; ++i) {
+        const int32_t id = shape_key_[1 + i];
+        const auto at = std::lower_bound(was.begin(), was.end(), std::make_pair(id, uint32_t(0)));
+        store3(rest_offset_.data(), i, load3(was_rest.data(), at->second));
+      }
+      return;
+    }
     for (size_t c = 0; c + 1 < comp_offsets_.size(); ++c) {
       Vec3 centre;
       double msum = 0;

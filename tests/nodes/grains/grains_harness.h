@@ -220,22 +220,21 @@ struct Scene {
   }
 };
 
-// A 10 x 10 x 10 cube of touching grains (r = 0.05, side 1 m), each joined to its +x, +y, +z
+// An m x m x m cube of touching grains (r = 0.05; m = 10: side 1 m), each joined to its +x, +y, +z
 // neighbours by a primitive (rigid shape matching's connectivity: the caller sets the settings,
 // with explicit constraint weight 0 the primitives hold nothing by themselves), tilted 20 and 10
 // degrees, its centre height + 0.9 m above the ground; rest (when set) receives each grain's
 // place in the untilted cube.
-inline Scene connected_cube(float height, std::vector<Vec3>* rest = nullptr) {
+inline Scene connected_cube(float height, std::vector<Vec3>* rest = nullptr, int m = 10) {
   Scene sc;
   sc.add_collider(ground());
-  const float r = 0.05f;
-  const int m = 10;
+  const float r = 0.05f, half = 0.5f * float(m - 1);
   const Pose tilt = Pose::from_trs({0, height + 0.9f, 0}, {20, 0, 10}, 1.0f);
   auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
   for (int a = 0; a < m; ++a)
     for (int b = 0; b < m; ++b)
       for (int c = 0; c < m; ++c) {
-        const Vec3 local{(a - 4.5f) * 2 * r, (b - 4.5f) * 2 * r, (c - 4.5f) * 2 * r};
+        const Vec3 local{(a - half) * 2 * r, (b - half) * 2 * r, (c - half) * 2 * r};
         if (rest) rest->push_back(local);
         sc.add(tilt.apply(local), r);
       }

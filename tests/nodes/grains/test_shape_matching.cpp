@@ -199,34 +199,19 @@ TEST_CASE("a shape-matched body keeps its rest shape when its grains come in ano
   // rest shape belongs to the grains (their ids), not to their places in that order: taken
   // again from where the grains are, it would keep whatever the last frame left (a grain the
   // final collision test pushed, a body bent), frame after frame. A 4 x 4 x 4 body of connected
-  // grains in free space (no gravity, shape matching on), one substep; one grain then moved by
-  // 40 % of a radius and the grains reversed in order (positions, velocities, masses, radii,
-  // ids, and the primitives' endpoints with them); one more substep: the fit puts every grain
-  // back on the first rest shape (within float rounding of the 1 m coordinates, 1e-6 m), where
-  // a rest shape taken again would keep the moved grain 40 % of a radius out (2 cm).
-  Scene sc;
+  // grains (test::connected_cube) in free space (no gravity, shape matching on), one substep; one
+  // grain then moved by 40 % of a radius and the grains reversed in order (positions, velocities,
+  // masses, radii, ids, and the primitives' endpoints with them); one more substep: the fit puts
+  // every grain back on the first rest shape (within float rounding of the 1 m coordinates, 1e-6
+  // m), where a rest shape taken again would keep the moved grain 40 % of a radius out (2 cm).
+  std::vector<Vec3> rest;
+  Scene sc = connected_cube(0.5f, &rest, 4);  // 1.4 m up: far from the ground
   sc.s = settings(24, 4, 20);
   sc.s.explicit_constraints_weight = 0;
   sc.s.enable_rigid_shape_matching = true;
   sc.gravity = {0, 0, 0};
   const float r = 0.05f;
-  const int m = 4;
-  std::vector<Vec3> rest;
-  auto index = [&](int a, int b, int c) { return (a * m + b) * m + c; };
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c) {
-        rest.push_back({0.3f + a * 2 * r, 1.0f + b * 2 * r, -0.2f + c * 2 * r});
-        sc.add(rest.back(), r);
-      }
   for (size_t i = 0; i < sc.size(); ++i) sc.ids.push_back(static_cast<int32_t>(1000 + 7 * i));
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int c = 0; c < m; ++c) {
-        if (a + 1 < m) sc.connect(index(a, b, c), index(a + 1, b, c));
-        if (b + 1 < m) sc.connect(index(a, b, c), index(a, b + 1, c));
-        if (c + 1 < m) sc.connect(index(a, b, c), index(a, b, c + 1));
-      }
   sc.substep();
   REQUIRE(deformation(sc, rest) < 1e-6);
   sc.P[3 * 5] += 0.4f * r;  // grain 5 out of its place

@@ -199,19 +199,26 @@ GR_INLINE void gr_shape_store(GR_GLOBAL float* a, gr_uint i, const double* x) {
   a[3 * i + 2] = (float)x[2];
 }
 
-/* The fold, made by one lane: rows 1 to LANES - 1 added into row 0 in turn (values doubles of
+/* The lanes component c uses: one a member, at most GR_SHAPE_LANES (a lane beyond them has no
+ * member and folds nothing) */
+GR_INLINE int gr_shape_lanes(const gr_shapes* s, gr_uint c) {
+  const gr_uint members = s->offsets[c + 1] - s->offsets[c];
+  return members < GR_SHAPE_LANES ? (int)members : GR_SHAPE_LANES;
+}
+
+/* The fold, made by one lane: rows 1 to lanes - 1 added into row 0 in turn (values doubles of
  * each) */
-GR_INLINE void gr_shape_fold_sum(GR_LOCAL double* parts, int values) {
+GR_INLINE void gr_shape_fold_sum(GR_LOCAL double* parts, int values, int lanes) {
   GR_SHAPES_EXACT
   int l, k;
-  for (l = 1; l < GR_SHAPE_LANES; ++l)
+  for (l = 1; l < lanes; ++l)
     for (k = 0; k < values; ++k) parts[k] += parts[GR_SHAPE_ROW * l + k];
 }
 
 /* ... of the shift's bounds: the largest of values 0-2, the smallest of 3-5 */
-GR_INLINE void gr_shape_fold_bounds(GR_LOCAL double* parts) {
+GR_INLINE void gr_shape_fold_bounds(GR_LOCAL double* parts, int lanes) {
   int l, k;
-  for (l = 1; l < GR_SHAPE_LANES; ++l)
+  for (l = 1; l < lanes; ++l)
     for (k = 0; k < 6; ++k) {
       const double mine = parts[k], other = parts[GR_SHAPE_ROW * l + k];
       parts[k] = (k < 3) == (other > mine) ? other : mine;

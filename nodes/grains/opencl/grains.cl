@@ -1010,21 +1010,23 @@ __kernel __attribute__((reqd_work_group_size(GR_SHAPE_LANES, 1, 1))) void gr_k_s
   const gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
   double means[6], centre[3];
   gr_shapes s;
+  int lanes;
   if ((int)c >= components) return; /* the whole group */
   s.offsets = offsets;
   s.members = members;
   s.rest = rest;
   s.mass = shape_mass;
   s.collider_normal = collider_normal;
+  lanes = gr_shape_lanes(&s, c); /* the folds read these lanes' rows */
   gr_shape_mass_lane(&s, p, c, l, parts);
   GR_SHAPE_SYNC;
-  if (l == 0) gr_shape_fold_sum(parts, 7);
+  if (l == 0) gr_shape_fold_sum(parts, 7, lanes);
   GR_SHAPE_SYNC;
   gr_shape_means(parts, means);
   GR_SHAPE_SYNC;
   gr_shape_fit_lane(&s, p, c, l, means, parts);
   GR_SHAPE_SYNC;
-  if (l == 0) gr_shape_fold_sum(parts, 9);
+  if (l == 0) gr_shape_fold_sum(parts, 9, lanes);
   GR_SHAPE_SYNC;
   if (l == 0) gr_shape_fit_rotation(parts, rot);
   GR_SHAPE_SYNC;
@@ -1033,14 +1035,14 @@ __kernel __attribute__((reqd_work_group_size(GR_SHAPE_LANES, 1, 1))) void gr_k_s
   GR_SHAPE_SYNC;
   gr_shape_shift_lane(&s, &g, &prm, p, c, l, parts);
   GR_SHAPE_SYNC;
-  if (l == 0) gr_shape_fold_bounds(parts);
+  if (l == 0) gr_shape_fold_bounds(parts, lanes);
   GR_SHAPE_SYNC;
   gr_shape_shift_apply(&s, p, c, l, parts);
   if (!collider_normal || !(prm.friction_with_colliders > 0.0f)) return;
   GR_SHAPE_SYNC;
   gr_shape_body_lane(&s, &g, p, c, l, parts);
   GR_SHAPE_SYNC;
-  if (l == 0) gr_shape_fold_sum(parts, 5);
+  if (l == 0) gr_shape_fold_sum(parts, 5, lanes);
   GR_SHAPE_SYNC;
   if (!(parts[4] > 0.0)) return; /* no contact touching: the whole group */
   {
@@ -1049,7 +1051,7 @@ __kernel __attribute__((reqd_work_group_size(GR_SHAPE_LANES, 1, 1))) void gr_k_s
     GR_SHAPE_SYNC;
     gr_shape_inertia_lane(&s, p, c, l, centre, parts);
     GR_SHAPE_SYNC;
-    if (l == 0) gr_shape_fold_sum(parts, 9);
+    if (l == 0) gr_shape_fold_sum(parts, 9, lanes);
     GR_SHAPE_SYNC;
     if (l == 0) {
       double out[6];

@@ -94,6 +94,8 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const gr_params& prm = c.prm;
   const size_t n = n_;
   const int ni = static_cast<int>(n);
+  // the device's end makes the impact data from the planes it found (else they are made here)
+  if (c.impacts && !planes_on_device_) c.impacts_here = true;
   // the predicted positions: the host reads them where the device does not solve (use_opencl
   // below takes them there)
   float* p = c.s.use_opencl ? p_.data() : host_p(c);
@@ -125,12 +127,12 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // finds each contact's carried load in the list its last solve left (build_sequential: the
   // list this host would build, bit for bit), so that the list crosses neither way; a device
   // whose work-items share a block orders its waves there too (Iterations::order_waves). The
-  // host builds it where the device does not: with impact data or rigid shapes projected here
-  // (which read it here between passes), loads the device does not hold (read back from a saved
-  // state), a list larger than a device buffer.
+  // host builds it where the device does not: with impact data made here (which read it after
+  // the passes) or rigid shapes projected here (between them), loads the device does not hold (read
+  // back from a saved state), a list larger than a device buffer.
   opencl::Iterations::BuiltList built;
   const bool built_there =
-      device && !kept && !c.impacts && !c.shapes_here && (!warm || device_.holds_contacts) &&
+      device && !kept && !c.impacts_here && !c.shapes_here && (!warm || device_.holds_contacts) &&
       open_device().builds_contacts() &&
       open_device().build_sequential(g, prm, device_sizes(c), c.d.id,
                                      g.plane_offsets ? plane_collider_.data() : nullptr, warm,
@@ -225,11 +227,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     seq_valid_ = true;
   }
 
-  // the shared pass's parts (kernels/sequential.h), at positions x
-  auto geometry_at = [&](const float* x, const SeqContact& q, gr_float3* nrm) {
-    return gr_seq_geometry(&g, x, &q, nrm);
-  };
-  auto geometry = [&](const SeqContact& q, gr_float3* nrm) { return geometry_at(p, q, nrm); };
   // body(q) over every contact, colour by colour, block by block, a colour's blocks shared out
   // among the threads when there are enough contacts; returns the largest body returned
   const bool parallel = c.threads > 1 && seq_.size() >= kParallelContacts;
@@ -446,9 +443,9 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     opencl::SequentialContacts on = contact_sweep();
     on.resident = resident;
     on.built = built_there;
-    // the list stays there unless the host reads it before the next substep (impact data,
-    // shapes projected here, below)
-    on.stay = !c.impacts && !c.shapes_here;
+    // the list stays there unless the host reads it before the next substep (impact data made
+    // here, shapes projected here, below)
+    on.stay = !c.impacts_here && !c.shapes_here;
     size_t loaded_there = 0;
     on.loaded = on.stay ? &loaded_there : nullptr;
     on.keep_warm = warm;
@@ -468,10 +465,18 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
     const bool shapes_there = c.shapes_on && !c.shapes_here;
     if (shapes_there) on.shapes = shape_arrays_there(c, &shapes);
     if (!c.shapes_on || shapes_there) {
-      // the substep's end there too (write_back takes what it wrote), unless the host reads the
-      // passes' positions: for the impact data
+      // the substep's end there too (write_back takes what it wrote) with the impact data, unless
+      // the host makes them from the passes' positions
       opencl::SubstepEnd end;
-      if (!c.impacts && !c.s.host_finish) on_device.finish = finish_there(c, &end);
+      if (!c.impacts_here && !c.s.host_finish) {
+        on_device.finish = finish_there(c, &end);
+        if (c.impacts) {
+          end.impact_collider = c.d.impact_collider;
+          end.impact_impulse = c.d.impact_impulse;
+          end.impact_normal = c.d.impact_normal;
+          end.impact_point = c.d.impact_point;
+        }
+      }
       cl.solve_sequential(gd, prm, size, p_for_device(c, p_on_device_), on, on_device,
                           c.iterations);
     } else {
@@ -523,17 +528,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   // impact data: what each collider plane moved its grain over the substep, its load and its
   // friction as they ended (a plane's normal holds through the substep; a contact that took
   // back all it pushed gave nothing)
-  if (c.impacts) {
-    for (const SeqContact& q : seq_) {
-      if (q.j >= 0 || (!(q.ln > 0.0f) && q.lt[0] == 0.0f && q.lt[1] == 0.0f && q.lt[2] == 0.0f))
-        continue;
-      gr_float3 nrm;
-      geometry(q, &nrm);
-      const gr_float3 d = gr_add(gr_scale(nrm, q.ln), gr_make3(q.lt[0], q.lt[1], q.lt[2]));
-      gr_store3(collider_dx_.data(),
-                GR_MAX_PLANES * q.i + static_cast<int>(q.e - g.plane_offsets[q.i]), d);
-    }
-  }
+  if (c.impacts_here) impact_loads(g, seq_.data(), seq_.size(), collider_dx_.data());
 
   // the loads the next substep starts from (on the device, with the list, when it stays there)
   if (device_.stale) {

@@ -62,9 +62,11 @@ class GrainsNode : public Node {
     } else {
       idx_ = sorted_;
     }
-    // the sleeping test, impact data, collision feedback, a global mass shock and constraints
-    // read the grains' positions here every substep; else the substep's end may stay on the
-    // device (use_opencl, GrainsData::may_hold_end), held in the store (hold_end)
+    // the sleeping test, a global mass shock and constraints read the grains' positions here
+    // every substep; else the substep's end may stay on the device (use_opencl,
+    // GrainsData::may_hold_end), held in the store (hold_end). Impact data and collision
+    // feedback read only the impact arrays, which the device makes where it holds its end
+    // (GrainsSolver::finish_there: the host's final collision test or impact data end it here)
     const bool impacts = st.add_impact_data, feedback = st.enable_collision_feedback;
     const bool sleeping = st.sleep_speed > 0 && !impacts && !feedback;
     // with use_opencl the device makes the whole sleeping test where it can
@@ -72,7 +74,7 @@ class GrainsNode : public Node {
     const bool sleep_there =
         sleeping && st.use_opencl && s.prim_count() == 0 &&
         solver_.sleeps_on_device(st, ctx.colliders.data(), ctx.colliders.size());
-    const bool may_hold = st.use_opencl && (!sleeping || sleep_there) && !impacts && !feedback &&
+    const bool may_hold = st.use_opencl && (!sleeping || sleep_there) &&
                           st.mass_shock() != MassShock::Global && s.prim_count() == 0;
     // where this node's last substep left its end held and nothing has read its positions
     // since (nor changed its velocities), the substep starts from there: the same grains in

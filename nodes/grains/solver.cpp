@@ -588,7 +588,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   }
 
   // 4. velocity, drift, final collisions; write P and v (and the impact data)
-  write_back(d, s, g, prm, colliders, collider_count, c.origin, c.impacts, c.threads);
+  write_back(d, s, g, prm, colliders, collider_count, c.origin, c.impacts_here, c.threads);
 
   if (history)
     save_history(d, s, g, prm, p_.data(), c.pair_friction_pass, c.collider_friction_pass, c.threads,
@@ -1004,6 +1004,12 @@ void GrainsSolver::open_sums(SubstepContext& c) {
     c.acc.friction_dx = friction_dx_.data();
   }
   c.impacts = c.d.impact_impulse && c.colliders_on;
+  // the device makes them at its end where it finds the planes (analytic colliders) and ends the
+  // substep: gauss_seidel's (not with rigid shapes projected here), jacobi's chain; gauss_seidel()
+  // and iterate() take them back here where it does not after all
+  c.impacts_here = c.impacts && !(s.use_opencl && !s.host_finish && !c.shapes_here &&
+                                  (s.contact_solver == kContactGaussSeidel || c.jacobi_there) &&
+                                  !any_mesh(c.colliders, c.collider_count));
   if (c.impacts) {
     collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
     c.acc.collider_dx = collider_dx_.data();
@@ -1060,10 +1066,10 @@ bool GrainsSolver::keep_rows(const SubstepContext& c) {
 
 // The rows (their offsets and indices) stay on the device (find_pairs) when nothing in the
 // substep reads them on the host: gauss_seidel builds its contact list there (not with impact
-// data or rigid shapes, whose lists the host builds; gauss_seidel.cpp brings the rows when the
-// device's build declines), and clumping's Jacobi group takes the host's rows; jacobi's passes
-// and its contact history read them there (load_history and save_history bring them where the
-// host makes the history). Neither keeps them with constrained pairs to drop. Error control's
+// data or rigid shapes made here, whose lists the host builds; gauss_seidel.cpp brings the rows
+// when the device's build declines), and clumping's Jacobi group takes the host's rows; jacobi's
+// passes and its contact history read them there (load_history and save_history bring them where
+// the host makes the history). Neither keeps them with constrained pairs to drop. Error control's
 // overlap statistics, the Verlet skin and the rows' longest are then reduced there
 // (contact_stats, remember_rows, find_pairs); a rebuild during the iterations, the grains node's
 // sleeping test, a saved state and a copy of the solver bring them (sync_rows).
@@ -1073,7 +1079,7 @@ bool GrainsSolver::rows_stay(const SubstepContext& c) const {
       (c.constraints_on && !s.collide_mutually_constrained_particles))
     return false;
   if (s.contact_solver != kContactGaussSeidel) return !s.host_history;
-  return !c.impacts && !c.shapes_here && !(s.clumping_weight > 0);
+  return !c.impacts_here && !c.shapes_here && !(s.clumping_weight > 0);
 }
 
 void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
@@ -1204,10 +1210,10 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   DevicePlanes device;
   device.p_there = first && p_on_device_;
   device.radius_there = first && searched_there_ && rows_true_radius_;
-  device.entries_stay =
-      c.s.contact_solver == kContactGaussSeidel
-          ? !c.impacts && !c.shapes_here && (!c.s.use_opencl || open_device().builds_contacts())
-          : jacobi_planes_stay(c);
+  device.entries_stay = c.s.contact_solver == kContactGaussSeidel
+                            ? !c.impacts_here && !c.shapes_here &&
+                                  (!c.s.use_opencl || open_device().builds_contacts())
+                            : jacobi_planes_stay(c);
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
   // the device's planes take the predicted positions there; the host's (a mesh collider's)
   // read them here
@@ -1298,19 +1304,20 @@ bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s) {
 }
 
 bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
-  return jacobi_whole(c) && !c.impacts && !c.s.host_history;
+  return jacobi_whole(c) && !c.impacts_here && !c.s.host_history;
 }
 
 // use_opencl with jacobi: the substep's prediction, pre-stabilization, iterations and end chained
 // on the device, the positions staying there between them (its end comes back, or stays, as
 // gauss_seidel's does; carry_start takes the next start from it), where nothing between them
 // runs here: no rigid shapes projected here, no rows or planes found again during the iterations
-// (jacobi_whole; Chebyshev's step is made there too), no impact data (its momenta read the passes'
-// sums and positions here), no contact history made here (host_history), and none of the test
-// switches send_history_p, host_predict and host_finish.
+// (jacobi_whole; Chebyshev's step is made there too), no impact data against a mesh collider
+// (whose final collision test is the host's: the momenta are made there, from the end), no
+// contact history made here (host_history), and none of the test switches send_history_p,
+// host_predict and host_finish.
 bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
   return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_here &&
-         !(c.d.impact_impulse && c.colliders_on);
+         !(c.d.impact_impulse && any_mesh(c.colliders, c.collider_count));
 }
 
 // The substep's end made on the device after its iterations (write_back takes what it wrote):
@@ -1421,6 +1428,16 @@ void GrainsSolver::iterate(SubstepContext& c) {
     w.p_there = p_on_device_ && (stable_there_ || !stabilized_);
     if (w.p_there) w.finish = finish_there(c, &end);
   }
+  // the impact data at that end, from the iterations' sums there and the planes it found (else
+  // here, from them)
+  const bool impacts_there = c.impacts && !c.impacts_here && w.finish && planes_on_device_;
+  if (impacts_there) {
+    end.impact_collider = c.d.impact_collider;
+    end.impact_impulse = c.d.impact_impulse;
+    end.impact_normal = c.d.impact_normal;
+    end.impact_point = c.d.impact_point;
+  }
+  if (c.impacts && !impacts_there) c.impacts_here = true;
   if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
   opencl::ShapeArrays shapes;
   if (device_whole && c.shapes_on) w.shapes = shape_arrays_there(c, &shapes);
@@ -1623,7 +1640,8 @@ void GrainsSolver::pre_stabilize(const gr_grains& g, const gr_params& prm, bool 
 
 // The substep's end: velocity from the iterate (gr_update_velocity: blend, caps, drift), the
 // swept final collision test against the colliders, P and v written back in world space (the
-// substep's coordinates plus origin), and with `impacts` each collider's momentum on the grain.
+// substep's coordinates plus origin), and with `impacts` each collider's momentum on the grain
+// (else the device's end made them, or none are asked for).
 void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_grains& g,
                               const gr_params& prm, const ColliderState* colliders,
                               size_t collider_count, const Vec3& origin, bool impacts,
@@ -1683,6 +1701,10 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   for (size_t c = 0; c < shapes.size(); ++c)
     shapes[c] = to_gr(colliders[c]), meshes[c] = colliders[c].shape.mesh.get();
   end_hit_.assign(there && test_here ? d.n : 0, 0);
+  // the impact data's plane rows, where sync_planes left them
+  gr_grains planes = g;
+  planes.plane_offsets = plane_offsets_.data();
+  planes.plane = plane_.data();
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long i = 0; i < ln; ++i) {
     int ii = static_cast<int>(i);
@@ -1700,7 +1722,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     }
     const Vec3 v_loop = v;
     int32_t hit = -1;
-    Vec3 hit_n;
+    Vec3 hit_n{};
     if (test_here && inv_mass_[i] > 0.0f) {  // a fixed grain stays where it is
       const float mu = s.friction_with_colliders * (d.friction ? d.friction[i] : 1.0f);
       hit = final_collision(shapes.data(), meshes.data(), collider_count, a, b, v, radius_[i], mu,
@@ -1709,31 +1731,13 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
     }
     store3(d.P, i, b);
     store3(d.v, i, v);
-    if (!impacts) continue;
     // Momentum from each collider plane: its applied corrections dx_c moved the grain, and
     // v = (p - P) / dt turns a displacement into a velocity change dx_c / dt; the final pass
     // changes v directly (added to its collider's slot, or a free one). Blend and caps, which
-    // act on v after the loop, are not counted.
-    const int K = GR_MAX_PLANES;
-    const uint32_t row = plane_offsets_[i];
-    const int planes = static_cast<int>(plane_offsets_[i + 1] - row);
-    int hit_slot = -1;
-    for (int q = 0; q < K; ++q) {
-      const size_t slot = K * i + q;
-      const int32_t c = q < planes ? plane_collider_[row + q] : -1;
-      Vec3 dv = c >= 0 ? load3(collider_dx_.data(), slot) / s.dt : Vec3{};
-      Vec3 n_c = c >= 0 ? load3(plane_.data() + 9 * (row + q), 1) : Vec3{};
-      if (hit >= 0 && hit_slot < 0 && (c == hit || c < 0)) {
-        hit_slot = q;
-        dv += v - v_loop;
-        if (c < 0) n_c = hit_n;
-      }
-      const bool any = !(dv.x == 0 && dv.y == 0 && dv.z == 0);
-      d.impact_collider[slot] = any ? (c >= 0 ? c : hit) : -1;
-      store3(d.impact_impulse, slot, any ? dv * mass_[i] : Vec3{});
-      store3(d.impact_normal, slot, n_c);
-      store3(d.impact_point, slot, b - n_c * radius_[i]);
-    }
+    // act on v after the loop, are not counted (kernels/impact.h).
+    if (impacts)
+      impact_slots(planes, s.dt, i, collider_dx_.data(), plane_collider_.data(), b, v, v_loop, hit,
+                   hit_n, d);
   }
   finish_P_ = d.P;
   end_changed_.clear();

@@ -26,6 +26,9 @@ struct GrainsSolver::SubstepContext {
   // precision), not on the device after each of gauss_seidel's (SequentialContacts::shapes)
   bool shapes_here = false;
   bool pair_friction_pass = false, collider_friction_pass = false, impacts = false;
+  // the impact data made here, from the host's contacts or sums and its end of the substep (else
+  // gauss_seidel's device makes them at its end, gr_k_end_impacts: open_sums says where)
+  bool impacts_here = false;
   bool reusable = false;   // the neighbour rows may be kept across substeps (keep_rows)
   bool same_rows = false;  // they were: this substep's rows are the last one's
   const float* search_radius = nullptr;
@@ -47,5 +50,15 @@ struct GrainsSolver::SubstepContext {
 int32_t final_collision(const gr_collider* colliders, const void* const* meshes, size_t count,
                         const Vec3& a, Vec3& b, Vec3& v, float r, float mu, const gr_params& prm,
                         Vec3* hit_n);
+
+// Impact data (kernels/impact.h, through impact.cpp): gauss_seidel's `count` contacts' loads into
+// their grains' slots of dx (3 GR_MAX_PLANES floats a grain, zero before) ...
+void impact_loads(const gr_grains& g, const gr_seq_contact* seq, size_t count, float* dx);
+// ... and grain i's slots of d's impact data at the substep's end (gr_impact_slots: b, v its
+// end, v_loop its velocity before the final collision test, hit the last collider the test
+// acted on along hit_n, -1: none)
+void impact_slots(const gr_grains& g, float dt, size_t i, const float* dx,
+                  const int32_t* plane_collider, const Vec3& b, const Vec3& v, const Vec3& v_loop,
+                  int32_t hit, const Vec3& hit_n, GrainsData& d);
 
 }  // namespace grains

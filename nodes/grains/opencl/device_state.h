@@ -167,6 +167,13 @@ struct Iterations::Impl {
   // before the last where neither p nor next holds it
   cl_kernel chebyshev = nullptr;
   Buffer before;
+  // the impact data (SubstepEnd::impact_collider): the kernels, and each grain's slots
+  // and the filled ones packed for the host (gr_k_impact_pack: their count, slots and values)
+  cl_kernel impact_loads = nullptr, end_impacts = nullptr, impact_pack = nullptr;
+  Buffer impact_collider, impact_impulse, impact_normal, impact_point, impact_count,
+      impact_index, impact_value;
+  std::vector<int32_t> impact_index_host;
+  std::vector<float> impact_value_host;
   // rigid shape matching (SequentialContacts::shapes): the kernel and the components' arrays
   cl_kernel shapes = nullptr;
   Buffer shape_offsets, shape_members, shape_rest, shape_mass, shape_normal;
@@ -305,7 +312,9 @@ struct Iterations::Impl {
                       &sleep_indices, &carry_time, &carry_anchor, &carry_accel,
                       &carry_contacts, &motion_part,
                       &predicted, &kept_plane_offsets, &kept_plane_which, &plane_differs,
-                      &shape_offsets, &shape_members, &shape_rest, &shape_mass, &shape_normal})
+                      &shape_offsets, &shape_members, &shape_rest, &shape_mass, &shape_normal,
+                      &impact_collider, &impact_impulse, &impact_normal, &impact_point,
+                      &impact_count, &impact_index, &impact_value})
       b->release();
     for (cl_kernel k : {iterate, friction, pin, others, sequential, stabilize, warm_open,
                         warm_factor, warm_cut, warm_balance, warm_cold, take_back, warm_repeat,
@@ -318,7 +327,8 @@ struct Iterations::Impl {
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table_kernel,
                         load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
-                        shift, chebyshev, shapes})
+                        shift, chebyshev, shapes, impact_loads, end_impacts,
+                        impact_pack})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -468,6 +478,9 @@ struct Iterations::Impl {
   void finish_substep(const gr_grains& g, const gr_params& prm, const HostArray* inputs,
                       Buffer* result, const SubstepEnd& e, bool velocity_there,
                       Buffer* start_there, size_t n);
+  // the impact data gr_k_end_impacts made (`slots` of them) into end's arrays: the filled slots
+  // packed there (gr_k_impact_pack) and brought back, the others -1 and zeros
+  void fetch_impacts(const SubstepEnd& end, size_t slots);
   // n grains' positions (3 n floats) from `from` into `to`, and a zero past them, as an upload
   // of positions has (one float past the last grain, which the contact loop's block loads read)
   void copy_positions(Buffer& to, const Buffer& from, size_t n);

@@ -9,6 +9,7 @@
 #include "distance.h"
 #include "final_collision.h"
 #include "history.h"
+#include "impact.h"
 #include "iterate.h"
 #include "mass_shock.h"
 #include "params.h"
@@ -289,6 +290,79 @@ __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
                          hit_n);
     }
     for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
+  }
+}
+
+/* gauss_seidel's impact data (kernels/impact.h): each collider contact's loads into its
+ * grain's slot of dx (zeroed before), a work-item a contact of a part */
+__kernel void gr_k_impact_loads(gr_params prm, GR_GRAINS_ARGS, __global const gr_seq_contact* seq,
+                                gr_uint base, int count, __global float* dx) {
+  const int k = (int)get_global_id(0);
+  (void)prm;
+  (void)base;
+  if (k >= count) return;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    gr_seq_impact_load(&g, seq + k, dx);
+  }
+}
+
+/* The final collision test of gr_k_final_collision (count colliders; 0: none) with the impact
+ * data beside it (kernels/impact.h): grain i's slots from dx, its plane row and what the test
+ * did to it, as GrainsSolver::write_back makes them, into collider_out, impulse, normal and
+ * point (GR_MAX_PLANES a grain). */
+__kernel void gr_k_end_impacts(gr_params prm, GR_GRAINS_ARGS,
+                               __global const gr_collider* colliders, int count,
+                               __global const float* start, float origin_x, float origin_y,
+                               float origin_z, __global float* P_out, __global float* v_out, int n,
+                               __global const float* dx, __global const int* plane_collider,
+                               __global int* collider_out, __global float* impulse,
+                               __global float* normal, __global float* point) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  {
+    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
+    float b[3], v[3], v_loop[3], hit_n[3] = {0.0f, 0.0f, 0.0f};
+    int c, k, hit = -1;
+    for (k = 0; k < 3; ++k) b[k] = P_out[3 * i + k], v[k] = v_loop[k] = v_out[3 * i + k];
+    if (count > 0 && g.inv_mass[i] > 0.0f) {
+      const float a[3] = {start[3 * i] + origin_x, start[3 * i + 1] + origin_y,
+                          start[3 * i + 2] + origin_z};
+      const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
+      float n_c[3];
+      for (c = 0; c < count; ++c) {
+        const gr_collider col = colliders[c];
+        if (gr_final_collision(&col, a, b, v, g.radius[i], mu, prm.static_threshold,
+                               prm.scale_kinetic, n_c)) {
+          hit = c;
+          for (k = 0; k < 3; ++k) hit_n[k] = n_c[k];
+        }
+      }
+      for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
+    }
+    gr_impact_slots(&g, prm.dt, i, dx, plane_collider, b, v, v_loop, hit, hit_n, collider_out,
+                    impulse, normal, point);
+  }
+}
+
+/* The slots gr_k_end_impacts filled (a collider named), packed for the host: each takes a
+ * record at an index an integer counter gives (any order: the host puts each back in its slot),
+ * its slot and collider in index (2 a record), its momentum, normal and point in value (9). */
+__kernel void gr_k_impact_pack(__global const int* collider, __global const float* impulse,
+                               __global const float* normal, __global const float* point,
+                               int slots, __global volatile gr_uint* count, __global int* index,
+                               __global float* value) {
+  const int e = (int)get_global_id(0);
+  gr_uint r;
+  int k;
+  if (e >= slots || collider[e] < 0) return;
+  r = atomic_inc(count);
+  index[2 * r] = e;
+  index[2 * r + 1] = collider[e];
+  for (k = 0; k < 3; ++k) {
+    value[9 * r + k] = impulse[3 * e + k];
+    value[9 * r + 3 + k] = normal[3 * e + k];
+    value[9 * r + 6 + k] = point[3 * e + k];
   }
 }
 

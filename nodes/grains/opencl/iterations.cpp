@@ -462,7 +462,9 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   if (acc.pair) m.copied_once(m.pair_sum, acc.pair, size.pair_entries * u);
   if (!size.collider_sums_stay) m.download(m.collider_sum, acc.collider, size.plane_entries * f);
   if (acc.collider) m.copied_once(m.collider_sum, acc.collider, size.plane_entries * f);
-  m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
+  // (the impact data made there read them there)
+  if (!(w.finish && w.finish->impact_collider))
+    m.download(m.collider_dx, acc.collider_dx, 3 * GR_MAX_PLANES * n * f);
 }
 
 void Iterations::Impl::upload_contacts(const SequentialContacts& s) {
@@ -895,6 +897,19 @@ void Iterations::solve_sequential(const gr_grains& g, const gr_params& prm, cons
   }
 
   Buffer* result = m.sequential_passes(g, prm, size, s, iterations, inputs);
+  if (w.finish && w.finish->impact_collider) {
+    // the impact data's loads: each collider contact's into its grain's slot (zero else):
+    // prm, grains, seq, base, count, dx
+    const float zero = 0.0f;
+    const size_t slots = 3 * GR_MAX_PLANES * n * f;
+    m.collider_dx.reserve(m.ctx, slots, m.largest);
+    check(clEnqueueFillBuffer(m.queue, m.collider_dx.mem, &zero, f, 0, slots, 0, nullptr, nullptr),
+          "clEnqueueFillBuffer");
+    cl_kernel k = m.kernel(m.impact_loads, "gr_k_impact_loads");
+    m.set_grains(k, prm, g, inputs);
+    set_buffer(k, kFirstOwn + 3, &m.collider_dx);
+    m.each_part(k, kFirstOwn, s);
+  }
   if (w.finish) {
     m.finish_substep(g, prm, inputs, result, *w.finish, velocities, w.x ? &m.start : &m.arrays[kP],
                      n);
@@ -944,14 +959,20 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
   const int keep = end->keep_velocity ? 1 : 0;
   check(clSetKernelArg(k, kFirstOwn + 10, sizeof(int), &keep), "clSetKernelArg");
   launch(k, n);
-  if (final_test) {
-    // the final collision test of what it wrote: prm, grains, colliders, count, start,
-    // origin, P_out, v_out, n (the colliders the planes took, sent once a substep)
-    const int colliders = static_cast<int>(end->collider_count);
-    upload_once(plane_colliders, end->colliders, colliders * sizeof(gr_collider));
-    cl_kernel c = kernel(final_collision, "gr_k_final_collision");
+  const bool impacts = end->impact_collider != nullptr;
+  if (final_test || impacts) {
+    // the final collision test of what it wrote (the colliders the planes took, sent once a
+    // substep), with the impact data beside it where they are asked for (gr_k_end_impacts, from
+    // collider_dx: gauss_seidel's contacts' loads or jacobi's sums): prm, grains, colliders,
+    // count (0: no test), start, origin, P_out, v_out, n; then dx, plane_collider, and each
+    // slot's collider, impulse, normal and point
+    const int colliders = final_test ? static_cast<int>(end->collider_count) : 0;
+    if (colliders > 0)
+      upload_once(plane_colliders, end->colliders, colliders * sizeof(gr_collider));
+    cl_kernel c = impacts ? kernel(end_impacts, "gr_k_end_impacts")
+                          : kernel(final_collision, "gr_k_final_collision");
     set_grains(c, prm, g, inputs);
-    set_buffer(c, kFirstOwn, &plane_colliders);
+    set_buffer(c, kFirstOwn, colliders > 0 ? &plane_colliders : nullptr);
     check(clSetKernelArg(c, kFirstOwn + 1, sizeof(int), &colliders), "clSetKernelArg");
     set_buffer(c, kFirstOwn + 2, start_there);
     for (cl_uint a = 0; a < 3; ++a)
@@ -959,7 +980,20 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
     set_buffer(c, kFirstOwn + 6, &stats_P);
     set_buffer(c, kFirstOwn + 7, &end_v);
     check(clSetKernelArg(c, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+    const size_t slots = GR_MAX_PLANES * n;
+    if (impacts) {
+      impact_collider.reserve(ctx, slots * sizeof(int32_t), largest);
+      for (Buffer* b : {&impact_impulse, &impact_normal, &impact_point})
+        b->reserve(ctx, 3 * slots * f, largest);
+      set_buffer(c, kFirstOwn + 9, &collider_dx);
+      set_buffer(c, kFirstOwn + 10, &plane_collider);
+      set_buffer(c, kFirstOwn + 11, &impact_collider);
+      set_buffer(c, kFirstOwn + 12, &impact_impulse);
+      set_buffer(c, kFirstOwn + 13, &impact_normal);
+      set_buffer(c, kFirstOwn + 14, &impact_point);
+    }
     launch(c, n);
+    if (impacts) fetch_impacts(*end, slots);
   }
   written_n = n;
   // what it wrote, kept for the next substep's start (carry_start): the positions copied
@@ -973,6 +1007,44 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
   if (!end->stay) {
     download(stats_P, end->P_out, 3 * n * f);
     download(end_v, end->v_out, 3 * n * f);
+  }
+}
+
+void Iterations::Impl::fetch_impacts(const SubstepEnd& end, size_t slots) {
+  const size_t f = sizeof(float);
+  // the filled slots packed (44 bytes each), the others -1 and zeros here: collider, impulse,
+  // normal, point, slots, count, index, value
+  gr_uint filled = 0;
+  impact_count.reserve(ctx, sizeof(gr_uint), largest);
+  impact_index.reserve(ctx, 2 * slots * sizeof(int32_t), largest);
+  impact_value.reserve(ctx, 9 * slots * f, largest);
+  send(impact_count, &filled, sizeof filled);
+  cl_kernel pack = kernel(impact_pack, "gr_k_impact_pack");
+  set_buffer(pack, 0, &impact_collider);
+  set_buffer(pack, 1, &impact_impulse);
+  set_buffer(pack, 2, &impact_normal);
+  set_buffer(pack, 3, &impact_point);
+  const int slot_count = static_cast<int>(slots);
+  check(clSetKernelArg(pack, 4, sizeof(int), &slot_count), "clSetKernelArg");
+  set_buffer(pack, 5, &impact_count);
+  set_buffer(pack, 6, &impact_index);
+  set_buffer(pack, 7, &impact_value);
+  launch(pack, slots);
+  download(impact_count, &filled, sizeof filled);
+  impact_index_host.resize(2 * size_t(filled));
+  impact_value_host.resize(9 * size_t(filled));
+  download(impact_index, impact_index_host.data(), impact_index_host.size() * sizeof(int32_t));
+  download(impact_value, impact_value_host.data(), impact_value_host.size() * f);
+  std::fill_n(end.impact_collider, slots, -1);
+  for (float* a : {end.impact_impulse, end.impact_normal, end.impact_point})
+    std::fill_n(a, 3 * slots, 0.0f);
+  for (size_t r = 0; r < filled; ++r) {
+    const size_t e = static_cast<size_t>(impact_index_host[2 * r]);
+    const float* value = &impact_value_host[9 * r];
+    end.impact_collider[e] = impact_index_host[2 * r + 1];
+    std::copy_n(value, 3, end.impact_impulse + 3 * e);
+    std::copy_n(value + 3, 3, end.impact_normal + 3 * e);
+    std::copy_n(value + 6, 3, end.impact_point + 3 * e);
   }
 }
 

@@ -10,8 +10,10 @@
 #include <vector>
 
 #include "engine/collider.h"
+#include "engine/mesh_shape.h"
 #include "engine/state_stream.h"
 #include "nodes/grains/solver.h"
+#include "tests/support/meshes.h"
 #include "tests/support/support.h"
 
 namespace grains::test {
@@ -88,6 +90,10 @@ struct Scene {
   GrainsStats stats;
   bool with_stats = true;  // the solver gives stats (error control's overlap statistics)
   bool hold_end = false;   // GrainsData::may_hold_end and start_held (substep())
+  // impact data (GrainsData::impact_*), kContactSlots a grain, when `impacts` is set
+  bool impacts = false;
+  std::vector<float> impact_impulse, impact_point, impact_normal;
+  std::vector<int32_t> impact_collider;
   std::vector<uint8_t> dead;
 
   size_t size() const { return mass.size(); }
@@ -144,6 +150,16 @@ struct Scene {
     if (!targetstiffness.empty()) {
       d.targetP = targetP.data();
       d.targetstiffness = targetstiffness.data();
+    }
+    if (impacts) {
+      const size_t slots = GrainsSolver::kContactSlots * size();
+      for (std::vector<float>* a : {&impact_impulse, &impact_point, &impact_normal})
+        a->assign(3 * slots, 0.0f);
+      impact_collider.assign(slots, -1);
+      d.impact_impulse = impact_impulse.data();
+      d.impact_point = impact_point.data();
+      d.impact_normal = impact_normal.data();
+      d.impact_collider = impact_collider.data();
     }
     return d;
   }
@@ -283,6 +299,31 @@ inline Scene layered_drop(bool use_opencl, bool round_trip, size_t* kept, int ma
     }
   }
   *kept = sc.solver.contact_lists_kept();
+  return sc;
+}
+
+// 16 grains (r = 4 cm) shot down at 30 m/s at a plate 1 cm thick (its top at y = 0.005 m, wider
+// than the grains), each above a fixed grain hanging under the plate: gauss_seidel on the OpenCL
+// device. The plate is an analytic box, or with `mesh` the same box as a triangle mesh.
+inline Scene shot_plate(bool mesh) {
+  const float r = 0.04f, top = 0.005f;
+  Scene sc;
+  sc.s = settings(24, 10, 10);
+  sc.s.contact_solver = kContactGaussSeidel;
+  sc.s.use_opencl = true;
+  const Vec3 centre{0.15f, 0.0f, 0.15f}, size{2.0f, 2 * top, 2.0f};
+  ColliderState plate = box(centre, size);
+  if (mesh) {
+    std::string problem;
+    plate.shape.kind = ShapeKind::Mesh;
+    plate.shape.mesh = MeshShape::build(box_mesh({0, 0, 0}, size), &problem);
+  }
+  sc.add_collider(plate);
+  for (int a = 0; a < 4; ++a)
+    for (int c = 0; c < 4; ++c) {
+      sc.add({0.1f * a, 0.06f, 0.1f * c}, r, 1.0f, {0.0f, -30.0f, 0.0f});
+      sc.add({0.1f * a, -0.1f, 0.1f * c}, r, 0.0f);  // fixed
+    }
   return sc;
 }
 

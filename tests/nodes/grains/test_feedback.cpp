@@ -2,15 +2,15 @@
 // Both measure the momentum a collider gives a grain: its applied corrections dx_c over a substep
 // change the grain's velocity by dx_c / dt (v = (p - P) / dt), the final collision pass by the
 // velocity it removes; the collider receives the opposite.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "engine/frame_writer.h"
+#include "tests/nodes/grains/bin_scene.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/support.h"
 
@@ -29,9 +29,33 @@ json ground_node() {
   return {{"name", "ground"}, {"type", "collider"}, {"params", {{"shape", "plane"}}}};
 }
 
-}  // namespace
+// a source's block (its parameters) under gravity, a grains node (its parameters), the ground
+// and a solver of `substeps` substeps
+Graph block_on_ground(const json& source, const json& grains, int substeps) {
+  return graph({{{"name", "src"}, {"type", "source"}, {"params", source}},
+                {{"name", "grav"},
+                 {"type", "force"},
+                 {"inputs", {"src"}},
+                 {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
+                {{"name", "n"}, {"type", "grains"}, {"inputs", {"grav"}}, {"params", grains}},
+                ground_node(),
+                {{"name", "s"},
+                 {"type", "solver"},
+                 {"inputs", {"n"}},
+                 {"params", {{"substeps", substeps}, {"colliders", {"ground"}}}}}});
+}
 
-TEST_CASE("collision feedback: a resting pile presses on the ground with its weight", "[grains][feedback]") {
+// use_opencl: the device makes the impact data at its end of the substep, so the grains node
+// reads no position and every end stays there (its positions and velocities come back once a
+// frame, when the frame reads them)
+void check_held(const Simulation& sim, int substeps) {
+  const GrainsSolver* solver = test::bin_solver(sim);
+  REQUIRE(solver);
+  CHECK(solver->held_ends() == size_t(substeps));
+}
+
+// (use_opencl: on the OpenCL device, whose end of the substep makes the impact data there)
+void resting_pile(bool opencl) {
   // A 5 x 3 x 5 block of 75 grains of 0.2 kg settles on the ground. At rest every substep
   // gravity gives the pile sum(m) g dt of downward momentum and only the ground takes it back,
   // so the ground's mean force over a frame is sum(m) g = 75 * 0.2 * 9.81 = 147.15 N.
@@ -40,24 +64,23 @@ TEST_CASE("collision feedback: a resting pile presses on the ground with its wei
   // divided by the two grains' different contact counts and create momentum between them (this
   // 3-layer pile then reads 0.87 of its weight). So the test disables averaging, with the
   // weights the help page asks for (0.5). Tolerance 2%: what is left of the settling motion.
-  Graph g = graph({{{"name", "src"}, {"type", "source"},
-                    {"params", {{"size", {0.5, 0.3, 0.5}}, {"separation", 0.1}, {"center", {0, 0.2, 0}},
-                                {"mass", 0.2}}}},
-                   {{"name", "grav"}, {"type", "force"}, {"inputs", {"src"}}, {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
-                   {{"name", "n"}, {"type", "grains"}, {"inputs", {"grav"}},
-                    {"params", {{"constraint_iterations", 20}, {"enable_collision_feedback", true},
-                                {"disable_constraint_averaging", true}, {"internal_collisions_weight", 0.5},
-                                {"friction_with_particles", 0.5}}}},
-                   ground_node(),
-                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
-                    {"params", {{"substeps", 4}, {"colliders", {"ground"}}}}}});
+  Graph g = block_on_ground(
+      {{"size", {0.5, 0.3, 0.5}}, {"separation", 0.1}, {"center", {0, 0.2, 0}}, {"mass", 0.2}},
+      {{"constraint_iterations", 20},
+       {"enable_collision_feedback", true},
+       {"disable_constraint_averaging", true},
+       {"internal_collisions_weight", 0.5},
+       {"friction_with_particles", 0.5},
+       {"use_opencl", opencl}},
+      4);
   Simulation sim(g, 2);
   std::string dir = test::temp_dir("feedback");
   FrameWriter w(dir, {});
   double sum_fy = 0, sum_fx = 0, sum_tx = 0;
-  int frames = 0;
+  int frames = 0, substeps = 0;
   for (int f = 1; f <= 48; ++f) {
     sim.step_frame();
+    substeps += sim.object(0).stats.substeps;
     const FrameStats& st = sim.object(0).stats;
     w.write(frame_output(f, sim.object(0), false));
     REQUIRE(st.colliders.size() == 1);
@@ -69,7 +92,9 @@ TEST_CASE("collision feedback: a resting pile presses on the ground with its wei
   }
   const double weight = 75 * 0.2 * kG;
   double fy = -sum_fy / frames;  // the ground is pushed down
-  report("feedback: ground force / pile weight", fy / weight);
+  report(opencl ? "feedback (use_opencl): ground force / pile weight"
+                : "feedback: ground force / pile weight",
+         fy / weight);
   CHECK(std::fabs(fy - weight) < 0.02 * weight);
   // the block is centred on the collider's origin: no sideways force, torque ~ 0 (a lever arm of
   // ~2% of the 0.5 m block would be 0.01 m)
@@ -80,26 +105,23 @@ TEST_CASE("collision feedback: a resting pile presses on the ground with its wei
   CHECK(csv.rfind("frame,time,collider,fx,fy,fz,tx,ty,tz\n", 0) == 0);
   CHECK(std::count(csv.begin(), csv.end(), '\n') == 49);
   CHECK(csv.find("\n48,2.0,ground,") != std::string::npos);  // floats always as floats
+  if (opencl) check_held(sim, substeps);
 }
 
-TEST_CASE("impact data: a dropped grain's impact impulses sum to its momentum change", "[grains][impacts]") {
+void dropped_grain(bool opencl) {
   // One grain of 0.5 kg dropped from 1 m falls on the ground, stops and rests. Over the run its
   // momentum changes by m (v_end - v_0) = m v_end (v_0 = 0) while gravity gives -m g T, so the
   // ground's impulse is J = m v_end + m g T (normal component). The sum of impactimpulse over
   // the frames must match to 2% (it is the same accounting, up to float rounding: ~1e-5).
-  Graph g = graph({{{"name", "src"}, {"type", "source"},
-                    {"params", {{"size", {0.1, 0.1, 0.1}}, {"separation", 0.1}, {"center", {0, 1, 0}},
-                                {"mass", 0.5}}}},
-                   {{"name", "grav"}, {"type", "force"}, {"inputs", {"src"}}, {"params", {{"force", {0, -9.81, 0}}, {"ignore_mass", true}}}},
-                   {{"name", "n"}, {"type", "grains"}, {"inputs", {"grav"}}, {"params", {{"add_impact_data", true}}}},
-                   ground_node(),
-                   {{"name", "s"}, {"type", "solver"}, {"inputs", {"n"}},
-                    {"params", {{"substeps", 2}, {"colliders", {"ground"}}}}}});
+  Graph g = block_on_ground(
+      {{"size", {0.1, 0.1, 0.1}}, {"separation", 0.1}, {"center", {0, 1, 0}}, {"mass", 0.5}},
+      {{"add_impact_data", true}, {"use_opencl", opencl}}, 2);
   Simulation sim(g, 2);
   double J = 0;
-  int first_hit = 0;
+  int first_hit = 0, substeps = 0;
   for (int f = 1; f <= 48; ++f) {
     sim.step_frame();
+    substeps += sim.object(0).stats.substeps;
     const ParticleStore& s = sim.object(0).pts;
     REQUIRE(s.size() == 1);
     if (s.i_if("impact")[0]) {
@@ -116,11 +138,36 @@ TEST_CASE("impact data: a dropped grain's impact impulses sum to its momentum ch
   const ParticleStore& s = sim.object(0).pts;
   const double T = 2.0, m = 0.5;
   double expected = m * load3(s.v3_if("v"), 0).y + m * kG * T;
-  report("impacts: sum impactimpulse / momentum change", J / expected);
-  report("impacts: first frame with an impact", first_hit);
+  report(opencl ? "impacts (use_opencl): sum impactimpulse / momentum change"
+                : "impacts: sum impactimpulse / momentum change",
+         J / expected);
+  report(opencl ? "impacts (use_opencl): first frame with an impact"
+                : "impacts: first frame with an impact",
+         first_hit);
   CHECK(first_hit > 8);   // free fall from 0.95 m takes 0.44 s = 10.5 frames
   CHECK(first_hit < 13);
   CHECK(std::fabs(J - expected) < 0.02 * expected);
+  if (opencl) check_held(sim, substeps);
+}
+
+}  // namespace
+
+TEST_CASE("collision feedback: a resting pile presses on the ground with its weight",
+          "[grains][feedback]") {
+  resting_pile(false);
+}
+
+TEST_CASE("use_opencl: collision feedback from the device's impact data", "[opencl][feedback]") {
+  resting_pile(true);
+}
+
+TEST_CASE("impact data: a dropped grain's impact impulses sum to its momentum change",
+          "[grains][impacts]") {
+  dropped_grain(false);
+}
+
+TEST_CASE("use_opencl: a dropped grain's impact impulses from the device", "[opencl][impacts]") {
+  dropped_grain(true);
 }
 
 TEST_CASE("impact data: a plane row rebuilt during the iterations keeps each collider's impulse",

@@ -10,11 +10,9 @@
 #include <limits>
 #include <vector>
 
-#include "engine/mesh_shape.h"
 #include "engine/motion.h"
 #include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
-#include "tests/support/meshes.h"
 
 using namespace grains;
 
@@ -131,26 +129,10 @@ TEST_CASE("use_opencl: the final collision test on the device and on the host af
   //    follows the device's end, and the 16 grains it moved go up alone for the statistics and
   //    the sleeping test's counts, which must be those of the positions the host holds. Without
   //    the statistics the sleeping test sends them.
-  const float r = 0.04f, top = 0.005f;
+  const float r = 0.04f, top = 0.005f;  // test::shot_plate's
   for (const bool mesh : {false, true}) {
-    test::Scene sc;
-    sc.s = test::settings(24, 10, 10);
-    sc.s.contact_solver = kContactGaussSeidel;
-    sc.s.use_opencl = true;
-    const Vec3 centre{0.15f, 0.0f, 0.15f}, size{2.0f, 2 * top, 2.0f};
-    ColliderState plate = test::box(centre, size);
-    if (mesh) {
-      std::string problem;
-      plate.shape.kind = ShapeKind::Mesh;
-      plate.shape.mesh = MeshShape::build(test::box_mesh({0, 0, 0}, size), &problem);
-      REQUIRE(plate.shape.mesh);
-    }
-    sc.add_collider(plate);
-    for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 4; ++c) {
-        sc.add({0.1f * a, 0.06f, 0.1f * c}, r, 1.0f, {0.0f, -30.0f, 0.0f});
-        sc.add({0.1f * a, -0.1f, 0.1f * c}, r, 0.0f);  // fixed
-      }
+    test::Scene sc = test::shot_plate(mesh);
+    REQUIRE((!mesh || sc.colliders[0].shape.mesh));
     for (const bool with_stats : {true, false}) {
       INFO((mesh ? "a mesh plate, " : "a box plate, ")
            << (with_stats ? "with" : "without") << " the overlap statistics");

@@ -565,3 +565,25 @@ TEST_CASE("a rest length of a few subnormal units gives a finite strain", "[grai
     if (instantaneous) CHECK(sc.strain[0] == std::numeric_limits<float>::max());
   }
 }
+
+TEST_CASE("accumulated strain at the float limit stays finite", "[grains][constraints]") {
+  // Accumulating mode adds each substep's increment e_end - e_start to the strain carried so
+  // far, a sum that can pass the largest float: a constraint whose rest length is 1e-35 m
+  // between two grains 0.1 m apart has strains near 1e34, and the grains drawn together change it
+  // by about -1e33 a substep, past what rounding absorbs at -FLT_MAX (half a step there is 1e31).
+  // Carried at -FLT_MAX, the sum would be -inf; the strain stays the largest float instead.
+  Scene sc;
+  sc.s = settings(24, 2, 4);
+  sc.s.instantaneous_strain = false;
+  sc.s.strain_decay = 0.0f;
+  sc.s.break_constraints = false;
+  sc.gravity = {0, 0, 0};
+  sc.add({0, 0, 0}, 0.02f, 1.0f);
+  sc.add({0.1f, 0, 0}, 0.02f, 1.0f);
+  sc.connect(0, 1, 1e-35f);
+  sc.strain[0] = -std::numeric_limits<float>::max();
+  sc.substep();
+  // the premise: the grains came together
+  CHECK(length(sc.pos(1) - sc.pos(0)) < 0.099f);
+  CHECK(sc.strain[0] == -std::numeric_limits<float>::max());
+}

@@ -4,6 +4,9 @@
 #include <CL/cl.h>
 
 #include <string>
+#include <vector>
+
+#include "nodes/grains/opencl/sources.h"
 
 namespace grains::opencl {
 
@@ -15,5 +18,8 @@ cl_device_id device_id(size_t platform, size_t device, std::string* problem);
 // OpenCL C 1.2 on device d of ctx; null with *log holding why (the compiler's log on a failed
 // build). On success *log holds the compiler's warnings, if any.
 cl_program build_program(cl_context ctx, cl_device_id d, std::string* log);
+// ... or the program of file `main` of `files` (program_text)
+cl_program build_program(cl_context ctx, cl_device_id d, const std::vector<SourceFile>& files,
+                         const std::string& main, std::string* log);
 
 }  // namespace grains::opencl

@@ -2,9 +2,8 @@
 
 #include <chrono>
 #include <cstdlib>
-#include <filesystem>
-#include <fstream>
-#include <random>
+#include <sstream>
+#include <stdexcept>
 
 #include "nodes/grains/opencl/cl_program.h"
 #include "nodes/grains/opencl/sources.h"
@@ -48,21 +47,42 @@ std::vector<cl_device_id> device_ids(cl_platform_id p) {
   return ids;
 }
 
-// A fresh folder holding the embedded sources, for the compiler's -I; removed when destroyed.
-struct SourceFolder {
-  std::filesystem::path path;
-  SourceFolder() {
-    std::random_device rd;
-    path = std::filesystem::temp_directory_path() /
-           ("grains-opencl-" + std::to_string(rd()) + "-" + std::to_string(rd()));
-    std::filesystem::create_directories(path);
-    for (const SourceFile& f : kernel_sources()) std::ofstream(path / f.name) << f.text;
+// the file an `#include "NAME"` line names (empty: the line includes nothing by that form)
+std::string included_name(const std::string& line) {
+  size_t k = line.find_first_not_of(" \t");
+  if (k == std::string::npos || line[k] != '#') return {};
+  k = line.find_first_not_of(" \t", k + 1);
+  if (k == std::string::npos || line.compare(k, 7, "include") != 0) return {};
+  k = line.find_first_not_of(" \t", k + 7);
+  if (k == std::string::npos || line[k] != '"') return {};
+  const size_t end = line.find('"', k + 1);
+  if (end == std::string::npos || line.find_first_not_of(" \t\r", end + 1) != std::string::npos)
+    return {};
+  return line.substr(k + 1, end - k - 1);
+}
+
+void expand(const std::vector<SourceFile>& files, const std::string& name, int depth,
+            std::string* out) {
+  const char* text = nullptr;
+  for (const SourceFile& f : files)
+    if (name == f.name) text = f.text;
+  // (an include cycle would recurse for ever: guarded files stop it long before this depth)
+  if (!text || depth > 64) throw std::runtime_error("grains program: cannot expand " + name);
+  *out += "#line 1 \"" + name + "\"\n";
+  std::istringstream in(text);
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    const std::string inner = included_name(line);
+    bool ours = false;
+    for (const SourceFile& f : files) ours = ours || inner == f.name;
+    if (!ours) {
+      *out += line + "\n";
+      continue;
+    }
+    expand(files, inner, depth + 1, out);
+    *out += "#line " + std::to_string(number + 1) + " \"" + name + "\"\n";
   }
-  ~SourceFolder() {
-    std::error_code ec;
-    std::filesystem::remove_all(path, ec);
-  }
-};
+}
 
 }  // namespace
 
@@ -229,11 +249,25 @@ cl_device_id device_id(size_t platform, size_t device, std::string* problem) {
   return dids[device];
 }
 
+std::string program_text(const std::vector<SourceFile>& files, const std::string& main) {
+  std::string out;
+  expand(files, main, 0, &out);
+  return out;
+}
+
 cl_program build_program(cl_context ctx, cl_device_id d, std::string* log) {
-  const SourceFolder folder;
+  return build_program(ctx, d, kernel_sources(), "grains.cl", log);
+}
+
+cl_program build_program(cl_context ctx, cl_device_id d, const std::vector<SourceFile>& files,
+                         const std::string& main, std::string* log) {
   std::string main_text;
-  for (const SourceFile& f : kernel_sources())
-    if (std::string(f.name) == "grains.cl") main_text = f.text;
+  try {
+    main_text = program_text(files, main);
+  } catch (const std::runtime_error& e) {
+    *log = e.what();
+    return nullptr;
+  }
   const char* text = main_text.c_str();
   cl_int status = CL_SUCCESS;
   cl_program program = clCreateProgramWithSource(ctx, 1, &text, nullptr, &status);
@@ -241,8 +275,7 @@ cl_program build_program(cl_context ctx, cl_device_id d, std::string* log) {
     *log = "clCreateProgramWithSource failed (" + std::to_string(status) + ")";
     return nullptr;
   }
-  // the folder is a plain name under the temporary directory: no quotes (PoCL passes them on)
-  const std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt -I " + folder.path.string();
+  const std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt";
   status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
   size_t n = 0;
   clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);

@@ -11,14 +11,10 @@ int32_t final_collision(const gr_collider* colliders, const void* const* meshes,
                         const Vec3& a, Vec3& b, Vec3& v, float r, float mu, const gr_params& prm,
                         Vec3* hit_n) {
   const float from[3] = {a.x, a.y, a.z};
-  float to[3] = {b.x, b.y, b.z}, vel[3] = {v.x, v.y, v.z}, n[3];
-  int32_t hit = -1;
-  for (size_t c = 0; c < count; ++c)
-    if (gr_final_collision(&colliders[c], from, to, vel, r, mu, prm.static_threshold,
-                           prm.scale_kinetic, n, meshes[c])) {
-      hit = static_cast<int32_t>(c);
-      *hit_n = {n[0], n[1], n[2]};
-    }
+  float to[3] = {b.x, b.y, b.z}, vel[3] = {v.x, v.y, v.z}, n[3] = {0.0f, 0.0f, 0.0f};
+  const int32_t hit = gr_final_collisions(colliders, static_cast<int>(count), from, to, vel, r, mu,
+                                          prm.static_threshold, prm.scale_kinetic, n, meshes);
+  if (hit >= 0) *hit_n = {n[0], n[1], n[2]};
   b = {to[0], to[1], to[2]};
   v = {vel[0], vel[1], vel[2]};
   return hit;

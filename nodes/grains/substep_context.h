@@ -27,7 +27,7 @@ struct GrainsSolver::SubstepContext {
   bool shapes_here = false;
   bool pair_friction_pass = false, collider_friction_pass = false, impacts = false;
   // the impact data made here, from the host's contacts or sums and its end of the substep (else
-  // gauss_seidel's device makes them at its end, gr_k_end_impacts: open_sums says where)
+  // gauss_seidel's device makes them at its end, gr_k_final_collision: open_sums says where)
   bool impacts_here = false;
   bool reusable = false;   // the neighbour rows may be kept across substeps (keep_rows)
   bool same_rows = false;  // they were: this substep's rows are the last one's

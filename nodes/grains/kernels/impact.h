@@ -5,7 +5,7 @@
  * test changed (v - v_loop) x mass, in that collider's slot or the first free one.
  *
  * The CPU runs these in GrainsSolver::write_back and gauss_seidel (through impact.cpp, compiled
- * without contraction), an OpenCL device in gr_k_impact_loads and gr_k_end_impacts: like the
+ * without contraction), an OpenCL device in gr_k_impact_loads and gr_k_final_collision: like the
  * final collision test they fuse no multiply and add (GR_SHAPE_EXACT), so both make the same
  * floats from the same inputs. */
 #ifndef GRAINS_KERNELS_IMPACT_H

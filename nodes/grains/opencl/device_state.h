@@ -169,7 +169,7 @@ struct Iterations::Impl {
   Buffer before;
   // the impact data (SubstepEnd::impact_collider): the kernels, and each grain's slots
   // and the filled ones packed for the host (gr_k_impact_pack: their count, slots and values)
-  cl_kernel impact_loads = nullptr, end_impacts = nullptr, impact_pack = nullptr;
+  cl_kernel impact_loads = nullptr, impact_pack = nullptr;
   Buffer impact_collider, impact_impulse, impact_normal, impact_point, impact_count,
       impact_index, impact_value;
   std::vector<int32_t> impact_index_host;
@@ -327,8 +327,7 @@ struct Iterations::Impl {
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table_kernel,
                         load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
-                        shift, chebyshev, shapes, impact_loads, end_impacts,
-                        impact_pack})
+                        shift, chebyshev, shapes, impact_loads, impact_pack})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);
@@ -478,7 +477,7 @@ struct Iterations::Impl {
   void finish_substep(const gr_grains& g, const gr_params& prm, const HostArray* inputs,
                       Buffer* result, const SubstepEnd& e, bool velocity_there,
                       Buffer* start_there, size_t n);
-  // the impact data gr_k_end_impacts made (`slots` of them) into end's arrays: the filled slots
+  // the impact data gr_k_final_collision made (`slots` of them) into end's arrays: the filled slots
   // packed there (gr_k_impact_pack) and brought back, the others -1 and zeros
   void fetch_impacts(const SubstepEnd& end, size_t slots);
   // n grains' positions (3 n floats) from `from` into `to`, and a zero past them, as an upload

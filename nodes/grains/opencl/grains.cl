@@ -265,31 +265,38 @@ __kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v
 }
 
 /* The final collision test (kernels/final_collision.h) of the substep's end gr_k_finish wrote
- * (P_out, world, and v_out), against `count` analytic colliders in order: grain i moved from its
- * start (start, the substep's coordinates, plus the origin: the host's world start, bit for bit,
- * solver.cpp local_origin). A fixed grain is not tested. */
+ * (P_out, world, and v_out), against `count` analytic colliders in order (0: no test): grain i
+ * moved from its start (start, the substep's coordinates, plus the origin: the host's world
+ * start, bit for bit, solver.cpp local_origin). A fixed grain is not tested. With collider_out
+ * the impact data beside it (kernels/impact.h): grain i's slots from dx, its plane row and what
+ * the test did to it, as GrainsSolver::write_back makes them, into collider_out, impulse, normal
+ * and point (GR_MAX_PLANES a grain); null: none. */
 __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
                                    __global const gr_collider* colliders, int count,
                                    __global const float* start, float origin_x, float origin_y,
                                    float origin_z, __global float* P_out, __global float* v_out,
-                                   int n) {
+                                   int n, __global const float* dx,
+                                   __global const int* plane_collider, __global int* collider_out,
+                                   __global float* impulse, __global float* normal,
+                                   __global float* point) {
   const int i = (int)get_global_id(0);
   if (i >= n) return;
   {
     gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    const float a[3] = {start[3 * i] + origin_x, start[3 * i + 1] + origin_y,
-                        start[3 * i + 2] + origin_z};
-    const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
-    float b[3], v[3], hit_n[3];
-    int c, k;
-    if (!(g.inv_mass[i] > 0.0f)) return;
-    for (k = 0; k < 3; ++k) b[k] = P_out[3 * i + k], v[k] = v_out[3 * i + k];
-    for (c = 0; c < count; ++c) {
-      const gr_collider col = colliders[c];
-      gr_final_collision(&col, a, b, v, g.radius[i], mu, prm.static_threshold, prm.scale_kinetic,
-                         hit_n);
+    float b[3], v[3], v_loop[3], hit_n[3] = {0.0f, 0.0f, 0.0f};
+    int k, hit = -1;
+    for (k = 0; k < 3; ++k) b[k] = P_out[3 * i + k], v[k] = v_loop[k] = v_out[3 * i + k];
+    if (count > 0 && g.inv_mass[i] > 0.0f) {
+      const float a[3] = {start[3 * i] + origin_x, start[3 * i + 1] + origin_y,
+                          start[3 * i + 2] + origin_z};
+      const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
+      hit = gr_final_collisions(colliders, count, a, b, v, g.radius[i], mu, prm.static_threshold,
+                                prm.scale_kinetic, hit_n);
+      for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
     }
-    for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
+    if (collider_out)
+      gr_impact_slots(&g, prm.dt, i, dx, plane_collider, b, v, v_loop, hit, hit_n, collider_out,
+                      impulse, normal, point);
   }
 }
 
@@ -307,45 +314,7 @@ __kernel void gr_k_impact_loads(gr_params prm, GR_GRAINS_ARGS, __global const gr
   }
 }
 
-/* The final collision test of gr_k_final_collision (count colliders; 0: none) with the impact
- * data beside it (kernels/impact.h): grain i's slots from dx, its plane row and what the test
- * did to it, as GrainsSolver::write_back makes them, into collider_out, impulse, normal and
- * point (GR_MAX_PLANES a grain). */
-__kernel void gr_k_end_impacts(gr_params prm, GR_GRAINS_ARGS,
-                               __global const gr_collider* colliders, int count,
-                               __global const float* start, float origin_x, float origin_y,
-                               float origin_z, __global float* P_out, __global float* v_out, int n,
-                               __global const float* dx, __global const int* plane_collider,
-                               __global int* collider_out, __global float* impulse,
-                               __global float* normal, __global float* point) {
-  const int i = (int)get_global_id(0);
-  if (i >= n) return;
-  {
-    gr_grains g = gr_device_grains(GR_GRAINS_NAMES);
-    float b[3], v[3], v_loop[3], hit_n[3] = {0.0f, 0.0f, 0.0f};
-    int c, k, hit = -1;
-    for (k = 0; k < 3; ++k) b[k] = P_out[3 * i + k], v[k] = v_loop[k] = v_out[3 * i + k];
-    if (count > 0 && g.inv_mass[i] > 0.0f) {
-      const float a[3] = {start[3 * i] + origin_x, start[3 * i + 1] + origin_y,
-                          start[3 * i + 2] + origin_z};
-      const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
-      float n_c[3];
-      for (c = 0; c < count; ++c) {
-        const gr_collider col = colliders[c];
-        if (gr_final_collision(&col, a, b, v, g.radius[i], mu, prm.static_threshold,
-                               prm.scale_kinetic, n_c)) {
-          hit = c;
-          for (k = 0; k < 3; ++k) hit_n[k] = n_c[k];
-        }
-      }
-      for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
-    }
-    gr_impact_slots(&g, prm.dt, i, dx, plane_collider, b, v, v_loop, hit, hit_n, collider_out,
-                    impulse, normal, point);
-  }
-}
-
-/* The slots gr_k_end_impacts filled (a collider named), packed for the host: each takes a
+/* The slots gr_k_final_collision filled (a collider named), packed for the host: each takes a
  * record at an index an integer counter gives (any order: the host puts each back in its slot),
  * its slot and collider in index (2 a record), its momentum, normal and point in value (9). */
 __kernel void gr_k_impact_pack(__global const int* collider, __global const float* impulse,

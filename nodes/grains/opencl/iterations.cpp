@@ -962,15 +962,14 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
   const bool impacts = end->impact_collider != nullptr;
   if (final_test || impacts) {
     // the final collision test of what it wrote (the colliders the planes took, sent once a
-    // substep), with the impact data beside it where they are asked for (gr_k_end_impacts, from
-    // collider_dx: gauss_seidel's contacts' loads or jacobi's sums): prm, grains, colliders,
-    // count (0: no test), start, origin, P_out, v_out, n; then dx, plane_collider, and each
-    // slot's collider, impulse, normal and point
+    // substep), with the impact data beside it where they are asked for (from collider_dx:
+    // gauss_seidel's contacts' loads or jacobi's sums): prm, grains, colliders, count (0: no
+    // test), start, origin, P_out, v_out, n; then dx, plane_collider, and each slot's collider,
+    // impulse, normal and point (null: no impact data)
     const int colliders = final_test ? static_cast<int>(end->collider_count) : 0;
     if (colliders > 0)
       upload_once(plane_colliders, end->colliders, colliders * sizeof(gr_collider));
-    cl_kernel c = impacts ? kernel(end_impacts, "gr_k_end_impacts")
-                          : kernel(final_collision, "gr_k_final_collision");
+    cl_kernel c = kernel(final_collision, "gr_k_final_collision");
     set_grains(c, prm, g, inputs);
     set_buffer(c, kFirstOwn, colliders > 0 ? &plane_colliders : nullptr);
     check(clSetKernelArg(c, kFirstOwn + 1, sizeof(int), &colliders), "clSetKernelArg");
@@ -985,13 +984,11 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
       impact_collider.reserve(ctx, slots * sizeof(int32_t), largest);
       for (Buffer* b : {&impact_impulse, &impact_normal, &impact_point})
         b->reserve(ctx, 3 * slots * f, largest);
-      set_buffer(c, kFirstOwn + 9, &collider_dx);
-      set_buffer(c, kFirstOwn + 10, &plane_collider);
-      set_buffer(c, kFirstOwn + 11, &impact_collider);
-      set_buffer(c, kFirstOwn + 12, &impact_impulse);
-      set_buffer(c, kFirstOwn + 13, &impact_normal);
-      set_buffer(c, kFirstOwn + 14, &impact_point);
     }
+    Buffer* const impact_args[] = {&collider_dx,    &plane_collider, &impact_collider,
+                                   &impact_impulse, &impact_normal,  &impact_point};
+    for (cl_uint a = 0; a < 6; ++a)
+      set_buffer(c, kFirstOwn + 9 + a, impacts ? impact_args[a] : nullptr);
     launch(c, n);
     if (impacts) fetch_impacts(*end, slots);
   }

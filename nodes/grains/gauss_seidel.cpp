@@ -94,8 +94,6 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
   const gr_params& prm = c.prm;
   const size_t n = n_;
   const int ni = static_cast<int>(n);
-  // the device's end makes the impact data from the planes it found (else they are made here)
-  if (c.impacts && !planes_on_device_) c.impacts_here = true;
   // the predicted positions: the host reads them where the device does not solve (use_opencl
   // below takes them there)
   float* p = c.s.use_opencl ? p_.data() : host_p(c);
@@ -468,15 +466,7 @@ void GrainsSolver::gauss_seidel(SubstepContext& c) {
       // the substep's end there too (write_back takes what it wrote) with the impact data, unless
       // the host makes them from the passes' positions
       opencl::SubstepEnd end;
-      if (!c.impacts_here && !c.s.host_finish) {
-        on_device.finish = finish_there(c, &end);
-        if (c.impacts) {
-          end.impact_collider = c.d.impact_collider;
-          end.impact_impulse = c.d.impact_impulse;
-          end.impact_normal = c.d.impact_normal;
-          end.impact_point = c.d.impact_point;
-        }
-      }
+      if (!c.impacts_here && !c.s.host_finish) on_device.finish = finish_there(c, &end);
       cl.solve_sequential(gd, prm, size, p_for_device(c, p_on_device_), on, on_device,
                           c.iterations);
     } else {

@@ -1005,8 +1005,8 @@ void GrainsSolver::open_sums(SubstepContext& c) {
   }
   c.impacts = c.d.impact_impulse && c.colliders_on;
   // the device makes them at its end where it finds the planes (analytic colliders) and ends the
-  // substep: gauss_seidel's (not with rigid shapes projected here), jacobi's chain; gauss_seidel()
-  // and iterate() take them back here where it does not after all
+  // substep: gauss_seidel's (not with rigid shapes projected here), jacobi's chain;
+  // update_planes() and iterate() take them back here where it does not after all
   c.impacts_here = c.impacts && !(s.use_opencl && !s.host_finish && !c.shapes_here &&
                                   (s.contact_solver == kContactGaussSeidel || c.jacobi_there) &&
                                   !any_mesh(c.colliders, c.collider_count));
@@ -1221,8 +1221,10 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   const float* p = device_planes ? p_for_device(c, device.p_there) : host_p(c);
   find_planes(P0_, p, c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale, c.threads,
               c.s.use_opencl ? &device : nullptr);
-  // the device's planes took the predicted positions (the solve copies them there)
+  // the device's planes took the predicted positions (the solve copies them there); the impact
+  // data its end would make read them there (else they are made here)
   if (first && planes_on_device_) p_on_device_ = true;
+  if (!planes_on_device_) c.impacts_here = c.impacts;
   planes_kept_there_ =
       planes_on_device_ && device.entries_stay && c.s.contact_solver != kContactGaussSeidel;
   g.plane_offsets = plane_offsets_.data();
@@ -1344,6 +1346,13 @@ opencl::SubstepEnd* GrainsSolver::finish_there(const SubstepContext& c, opencl::
   }
   const bool test_here = c.s.final_collision_test && c.colliders_on && !collided_there_;
   end->stay = end_stays_ = c.d.may_hold_end && !test_here && !c.constraints_on;
+  // the impact data made there too, unless they are made here
+  if (c.impacts && !c.impacts_here) {
+    end->impact_collider = c.d.impact_collider;
+    end->impact_impulse = c.d.impact_impulse;
+    end->impact_normal = c.d.impact_normal;
+    end->impact_point = c.d.impact_point;
+  }
   return end;
 }
 
@@ -1428,16 +1437,8 @@ void GrainsSolver::iterate(SubstepContext& c) {
     w.p_there = p_on_device_ && (stable_there_ || !stabilized_);
     if (w.p_there) w.finish = finish_there(c, &end);
   }
-  // the impact data at that end, from the iterations' sums there and the planes it found (else
-  // here, from them)
-  const bool impacts_there = c.impacts && !c.impacts_here && w.finish && planes_on_device_;
-  if (impacts_there) {
-    end.impact_collider = c.d.impact_collider;
-    end.impact_impulse = c.d.impact_impulse;
-    end.impact_normal = c.d.impact_normal;
-    end.impact_point = c.d.impact_point;
-  }
-  if (c.impacts && !impacts_there) c.impacts_here = true;
+  // (the impact data at that end, from the iterations' sums there; else here, from them)
+  if (!w.finish) c.impacts_here = c.impacts;
   if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
   opencl::ShapeArrays shapes;
   if (device_whole && c.shapes_on) w.shapes = shape_arrays_there(c, &shapes);
@@ -1522,7 +1523,8 @@ void GrainsSolver::build_shapes(const GrainsData& d) {
       for (size_t i = 0; same && i < n; ++i) same = was[i].first == ids[i];
       if (!same) was.clear();
     }
-    const std::vector<float> was_rest = was.empty() ? std::vector<float>() : rest_offset_;
+    std::vector<float> was_rest;
+    if (!was.empty()) was_rest.swap(rest_offset_);  // made again below
     shape_key_.swap(key);
     ++shape_generation_;
     std::vector<int32_t> parent(n);

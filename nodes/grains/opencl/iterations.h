@@ -145,10 +145,10 @@ struct SubstepEnd {
   // what it wrote stays there, P_out and v_out unwritten until fetch_end() brings them (v_out
   // still says whether the velocities are written)
   bool stay = false;
-  // the impact data made there (gr_k_final_collision, kernels/impact.h) from gauss_seidel's contacts'
-  // loads or jacobi's sums of the planes' moves and what the final collision test did, into these
-  // (GR_MAX_PLANES slots a grain each, GrainsData's impact arrays; null: none), which come back
-  // even where the end stays
+  // the impact data made there (gr_k_final_collision, kernels/impact.h) from gauss_seidel's
+  // contacts' loads or jacobi's sums of the planes' moves and what the final collision test did,
+  // into these (GR_MAX_PLANES slots a grain each, GrainsData's impact arrays; null: none),
+  // which come back even where the end stays
   int32_t* impact_collider = nullptr;
   float* impact_impulse = nullptr;
   float* impact_normal = nullptr;

@@ -1,5 +1,6 @@
 // Impact data made on the OpenCL device at the end of the substep (kernels/impact.h:
-// gr_k_impact_loads, gr_k_final_collision, gr_k_impact_pack), against the host's from the same state.
+// gr_k_impact_loads, gr_k_final_collision, gr_k_impact_pack), against the host's from the same
+// state.
 #include <catch2/catch.hpp>
 #include <cfloat>
 #include <vector>

@@ -95,7 +95,8 @@ TEST_CASE("the fit's rotation is the polar decomposition's, flat, straight and m
 TEST_CASE("use_opencl: the device projects rigid shapes as the host does, bit for bit",
           "[opencl][shape]") {
   // Three components, of 2, 65 and 300 grains (two lanes of one grain; 64 lanes, the first with
-  // two; 64 lanes of four or five), a hundred free grains among them, their rest shapes turned, stretched by up to 5 % and moved:
+  // two; 64 lanes of four or five), a hundred free grains among them, their rest shapes turned,
+  // stretched by up to 5 % and moved:
   // each grain's rest offset its place in the rest shape less the shape's centre. The lower
   // grains stand in a moving ground (a plane entry each: surface at y = 0, normal +y, the
   // surface moving at 0.3 m/s along x) and a third of those already carry a normal sum, so that

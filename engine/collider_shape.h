@@ -5,8 +5,8 @@
  * A pose places the local shape in the world with uniform scale, world = t + s R local (R
  * row-major). The local shapes: plane y = 0, solid below (normal +y); box centred, full extents
  * `size`; sphere of `radius`; torus in the xz plane, `radius` (ring) and `tube`; capsule along
- * y, `height` between the hemisphere centres and `radius`. A mesh has no distance here (the CPU
- * has its own, engine/mesh_shape.h): gr_shape_distance gives it 1e30.
+ * y, `height` between the hemisphere centres and `radius`. A mesh's distance is not
+ * gr_shape_distance's (which gives it 1e30) but engine/mesh_query.h's (gr_local_distance, below).
  *
  * Both sides take the same float operations in the same order, the device's division and
  * square root correctly rounded (-cl-fp32-correctly-rounded-divide-sqrt), and neither fuses a
@@ -210,31 +210,46 @@ static inline void gr_collider_velocity(const gr_collider* c, const float* x, fl
   for (a = 0; a < 3; ++a) v[a] = (x[a] - back[a]) / c->dt;
 }
 
-/* A mesh's queries are the host's alone (engine/mesh_shape.h, through the hooks engine/collider.cpp
- * defines): on the host the functions below take each collider's mesh (null for an analytic
- * shape) as their last argument, GR_MESH_PARAM; an OpenCL device, which holds no mesh, has no such
- * argument and answers the analytic shapes. */
+/* A mesh's queries are engine/mesh_query.h's. The functions below take each collider's mesh
+ * (null for an analytic shape) as their last argument, GR_MESH_PARAM: on the host a MeshShape
+ * (engine/mesh_shape.h), through the hooks engine/collider.cpp defines; on an OpenCL device the
+ * mesh's arrays there (gr_mesh, private, pointing into global memory), through the hooks the
+ * program defines (nodes/grains/opencl/grains.cl: the queries where the device has double
+ * precision; without it the host keeps every mesh's queries). */
 #if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
-#define GR_MESH_PARAM
-#define GR_MESH_ARG(m)
+#include "mesh_query.h"
+#define GR_MESH_PARAM , const gr_mesh* mesh
+#define GR_MESH_TYPE const gr_mesh*
 #else
 #define GR_MESH_PARAM , const void* mesh
-#define GR_MESH_ARG(m) , m
-/* MeshShape::distance (local p, normal n or null, `within`), ::crossing (local a to b, normal n)
- * and whether the mesh is a shell (not closed) */
-float gr_mesh_distance(const void* mesh, const float* p, float* n, float within);
-float gr_mesh_crossing(const void* mesh, const float* a, const float* b, float* n);
-int gr_mesh_shell(const void* mesh);
+#define GR_MESH_TYPE const void*
 #endif
+#define GR_MESH_ARG(m) , m
+/* A loop over the colliders takes their meshes as GR_MESHES_PARAM and collider c's as
+ * GR_MESH_OF_COLLIDER(name, c), which declares `name` (null: an analytic shape): on the host
+ * meshes[c], MeshShapes (meshes null: none); on a device collider c's in the set of words
+ * `meshes` (engine/mesh_query.h, gr_mesh_of; null: none). */
+#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+#define GR_MESHES_PARAM , __global const int* meshes
+#define GR_MESH_OF_COLLIDER(name, c) \
+  gr_mesh name##_arrays;             \
+  const gr_mesh* name = gr_mesh_of(meshes, c, &name##_arrays)
+#else
+#define GR_MESHES_PARAM , const void* const* meshes
+#define GR_MESH_OF_COLLIDER(name, c) const void* name = meshes ? meshes[c] : 0
+#endif
+/* the distance from local p (normal n or null, exact below `within`: MeshShape::distance), the
+ * first crossing of local a to b (normal n: MeshShape::crossing) and whether the mesh is a shell
+ * (not closed) */
+float gr_mesh_distance(GR_MESH_TYPE mesh, const float* p, float* n, float within);
+float gr_mesh_crossing(GR_MESH_TYPE mesh, const float* a, const float* b, float* n);
+int gr_mesh_shell(GR_MESH_TYPE mesh);
 
 /* the local shape's signed distance at p, exact below `within` (a mesh may give anything from
  * `within` up to its distance beyond; the analytic shapes are exact everywhere) */
 static inline float gr_local_distance(const gr_shape* sh, const float* p, float* n,
                                       float within GR_MESH_PARAM) {
-#if !defined(__OPENCL_VERSION__) && !defined(__OPENCL_C_VERSION__)
   if (sh->kind == GR_SHAPE_MESH && mesh) return gr_mesh_distance(mesh, p, n, within);
-#endif
-  (void)within;
   return gr_shape_distance(sh, p, n);
 }
 
@@ -301,10 +316,6 @@ static inline float gr_collider_sweep(const gr_collider* c, const float* a, cons
  * point came from, into `side`. */
 static inline float gr_collider_shell_crossing(const gr_collider* c, const float* a, const float* b,
                                                float* at, float* side GR_MESH_PARAM) {
-#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
-  (void)c, (void)a, (void)b, (void)at, (void)side;
-  return 2.0f;
-#else
   GR_SHAPE_EXACT
   float la[3], lb[3], n[3], x[3];
   float t, along;
@@ -322,7 +333,6 @@ static inline float gr_collider_shell_crossing(const gr_collider* c, const float
     for (k = 0; k < 3; ++k) n[k] = -n[k];
   gr_pose_rotate(&c->pose, n, side);
   return t;
-#endif
 }
 
 #endif

@@ -21,81 +21,6 @@ D3 cross(const D3& a, const D3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 
-// Where on a triangle the nearest point lies: its face, one of its vertices, one of its edges
-// (edge k joins vertex k and vertex (k + 1) % 3).
-enum Feature { kFace, kVertex0, kVertex1, kVertex2, kEdge0, kEdge1, kEdge2 };
-
-// The point of triangle (a, b, c) nearest to p, and its feature (Ericson, Real-Time Collision
-// Detection §5.1.5: the Voronoi regions of the vertices, then the edges, then the face).
-D3 closest_on_triangle(const D3& p, const D3& a, const D3& b, const D3& c, Feature* f) {
-  const D3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return *f = kVertex0, a;
-  const D3 bp = p - b;
-  const double d3v = dot(ab, bp), d4 = dot(ac, bp);
-  if (d3v >= 0 && d4 <= d3v) return *f = kVertex1, b;
-  const double vc = d1 * d4 - d3v * d2;
-  if (vc <= 0 && d1 >= 0 && d3v <= 0) return *f = kEdge0, a + ab * (d1 / (d1 - d3v));
-  const D3 cp = p - c;
-  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return *f = kVertex2, c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return *f = kEdge2, a + ac * (d2 / (d2 - d6));
-  const double va = d3v * d6 - d5 * d4;
-  if (va <= 0 && d4 - d3v >= 0 && d5 - d6 >= 0)
-    return *f = kEdge1, b + (c - b) * ((d4 - d3v) / ((d4 - d3v) + (d5 - d6)));
-  const double inv = 1.0 / (va + vb + vc);
-  return *f = kFace, a + ab * (vb * inv) + ac * (vc * inv);
-}
-
-// Squared distance from p to the box [lo, hi] (0 inside).
-double box_distance2(const float* lo, const float* hi, const D3& p) {
-  const double q[3] = {p.x, p.y, p.z};
-  double s = 0;
-  for (int k = 0; k < 3; ++k) {
-    double e = q[k] < lo[k] ? lo[k] - q[k] : (q[k] > hi[k] ? q[k] - hi[k] : 0.0);
-    s += e * e;
-  }
-  return s;
-}
-
-// The parameter range [t0, t1] within [0, 1] over which p + t d lies in the box [lo, hi]
-// (slab test); false when it never does. inv_d: 1 / d per axis (infinite for a zero component).
-bool segment_box(const float* lo, const float* hi, const D3& p, const D3& inv_d, double* t_in) {
-  const double q[3] = {p.x, p.y, p.z}, id[3] = {inv_d.x, inv_d.y, inv_d.z};
-  double t0 = 0, t1 = 1;
-  for (int k = 0; k < 3; ++k) {
-    if (std::isinf(id[k])) {
-      if (q[k] < lo[k] || q[k] > hi[k]) return false;
-      continue;
-    }
-    double ta = (lo[k] - q[k]) * id[k], tb = (hi[k] - q[k]) * id[k];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
-  }
-  *t_in = t0;
-  return true;
-}
-
-// Where p + t d meets triangle (a, b, c), t in [0, 1] (Moeller & Trumbore 1997); a negative
-// value when it does not. Points on an edge count for both triangles that share it.
-double segment_triangle(const D3& p, const D3& d, const D3& a, const D3& b, const D3& c) {
-  const D3 e1 = b - a, e2 = c - a, h = cross(d, e2);
-  const double det = dot(e1, h);
-  if (std::fabs(det) < 1e-300) return -1;  // parallel
-  const double inv = 1.0 / det;
-  const D3 s = p - a;
-  const double u = dot(s, h) * inv;
-  if (u < 0 || u > 1) return -1;
-  const D3 q = cross(s, e1);
-  const double v = dot(d, q) * inv;
-  if (v < 0 || u + v > 1) return -1;
-  const double t = dot(e2, q) * inv;
-  return t >= 0 && t <= 1 ? t : -1;
-}
-
 Vec3 unit(const D3& v) {
   double l = std::sqrt(dot(v, v));
   if (!(l > 0)) return {0, 1, 0};
@@ -303,107 +228,38 @@ std::shared_ptr<const MeshShape> MeshShape::build(const Mesh& in, std::string* p
   return shape;
 }
 
-float MeshShape::crossing(const Vec3& af, const Vec3& bf, Vec3* normal) const {
-  const D3 p = d3(af), d = d3(bf) - p;
-  const double inf = std::numeric_limits<double>::infinity();
-  const D3 inv_d{d.x != 0 ? 1 / d.x : inf, d.y != 0 ? 1 / d.y : inf, d.z != 0 ? 1 / d.z : inf};
-  double best = inf;
-  int best_t = -1;
-  int stack[64];
-  int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node& nd = nodes_[stack[--top]];
-    double t_in;
-    if (!segment_box(nd.lo, nd.hi, p, inv_d, &t_in) || t_in > best) continue;
-    if (nd.count == 0) {
-      stack[top++] = nd.first;
-      stack[top++] = nd.first + 1;
-      continue;
-    }
-    for (int i = nd.first; i < nd.first + nd.count; ++i) {
-      const auto& t = tri_[i];
-      const double hit = segment_triangle(p, d, d3(mesh_.vertices[t[0]]),
-                                          d3(mesh_.vertices[t[1]]), d3(mesh_.vertices[t[2]]));
-      if (hit > 0 && hit < best) best = hit, best_t = i;  // a start on the surface is on no side
-    }
-  }
-  if (best_t < 0) return 2.0f;
-  if (normal) *normal = face_n_[best_t];
-  return static_cast<float>(best);
+static_assert(sizeof(Vec3) == 3 * sizeof(float) && sizeof(std::array<int, 3>) == 3 * sizeof(int),
+              "the arrays as engine/mesh_query.h reads them");
+
+gr_mesh MeshShape::view() const {
+  gr_mesh m;
+  m.nodes = nodes_.data();
+  m.tri = tri_.empty() ? nullptr : tri_[0].data();
+  m.vertices = mesh_.vertices.empty() ? nullptr : &mesh_.vertices[0].x;
+  m.face_n = face_n_.empty() ? nullptr : &face_n_[0].x;
+  m.edge_n = edge_n_.empty() ? nullptr : &edge_n_[0].x;
+  m.vertex_n = vertex_n_.empty() ? nullptr : &vertex_n_[0].x;
+  for (int k = 0; k < 3; ++k) m.lo[k] = lo_[k], m.hi[k] = hi_[k];
+  m.closed = closed_ ? 1 : 0;
+  return m;
 }
 
-float MeshShape::distance(const Vec3& pf, Vec3* normal, float within) const {
-  const D3 p = d3(pf);
-  const double cap = within > 0 ? double(within) * double(within) : 0.0;
-  double best = cap;
-  D3 best_c{0, 0, 0};
-  int best_t = -1;
-  Feature best_f = kFace;
-  // each visit pops one node and pushes at most two, so the stack holds at most depth + 1
-  // nodes; median splits of fewer than 2^31 triangles are under 32 deep
-  int stack[64];
-  int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node& nd = nodes_[stack[--top]];
-    if (box_distance2(nd.lo, nd.hi, p) >= best) continue;
-    if (nd.count > 0) {
-      for (int i = nd.first; i < nd.first + nd.count; ++i) {
-        const auto& t = tri_[i];
-        Feature f;
-        const D3 c = closest_on_triangle(p, d3(mesh_.vertices[t[0]]), d3(mesh_.vertices[t[1]]),
-                                         d3(mesh_.vertices[t[2]]), &f);
-        const D3 d = p - c;
-        const double d2 = dot(d, d);
-        if (d2 < best) {
-          best = d2;
-          best_c = c;
-          best_t = i;
-          best_f = f;
-        }
-      }
-      continue;
-    }
-    // nearer child on top of the stack
-    const int a = nd.first, b = nd.first + 1;
-    const double da = box_distance2(nodes_[a].lo, nodes_[a].hi, p);
-    const double db = box_distance2(nodes_[b].lo, nodes_[b].hi, p);
-    const bool a_first = da <= db;
-    const int near = a_first ? a : b, far = a_first ? b : a;
-    const double dnear = a_first ? da : db, dfar = a_first ? db : da;
-    if (dfar < best) stack[top++] = far;
-    if (dnear < best) stack[top++] = near;
-  }
-  if (best_t < 0) {  // nothing nearer than `within`
-    const double box = std::sqrt(box_distance2(&lo_.x, &hi_.x, p));
-    // a closed mesh's far point may be inside it: only the whole walk tells the sign
-    if (closed_ && box == 0 && std::isfinite(cap))
-      return distance(pf, normal, std::numeric_limits<float>::infinity());
-    if (normal) *normal = {0, 1, 0};
-    return static_cast<float>(std::max(double(within), box));
-  }
-  Vec3 pseudo;
-  switch (best_f) {
-    case kFace: pseudo = face_n_[best_t]; break;
-    case kVertex0: case kVertex1: case kVertex2:
-      pseudo = vertex_n_[tri_[best_t][best_f - kVertex0]];
-      break;
-    default: pseudo = edge_n_[3 * best_t + (best_f - kEdge0)]; break;
-  }
-  const D3 away = p - best_c;
-  const double dist = std::sqrt(best);
-  const double side = dot(away, d3(pseudo));
-  // a shell has no inside: the distance is unsigned, the normal points toward p
-  const double sign = closed_ && side < 0 ? -1.0 : 1.0;
-  if (normal) {
-    if (dist > 1e-12) {
-      *normal = unit(away * sign);
-    } else {
-      *normal = pseudo;
-    }
-  }
-  return static_cast<float>(sign * dist);
+float MeshShape::crossing(const Vec3& a, const Vec3& b, Vec3* normal) const {
+  const gr_mesh m = view();
+  const float af[3] = {a.x, a.y, a.z}, bf[3] = {b.x, b.y, b.z};
+  float n[3];
+  const float t = gr_mesh_query_crossing(&m, af, bf, n);
+  if (normal && t <= 1.0f) *normal = {n[0], n[1], n[2]};
+  return t;
+}
+
+float MeshShape::distance(const Vec3& p, Vec3* normal, float within) const {
+  const gr_mesh m = view();
+  const float at[3] = {p.x, p.y, p.z};
+  float n[3];
+  const float d = gr_mesh_query_distance(&m, at, normal ? n : nullptr, within);
+  if (normal) *normal = {n[0], n[1], n[2]};
+  return d;
 }
 
 }  // namespace grains

@@ -11,7 +11,8 @@
 //
 // The query walks the hierarchy nearest box first and skips every box farther than the best
 // triangle found; triangle tests are in double precision so that the nearest feature, and with
-// it the sign, does not flip between the two triangles of an edge.
+// it the sign, does not flip between the two triangles of an edge. The queries are
+// engine/mesh_query.h's, which an OpenCL device runs on the same arrays (view()).
 #pragma once
 #include <limits>
 #include <memory>
@@ -19,6 +20,7 @@
 #include <vector>
 
 #include "engine/geometry_io.h"
+#include "engine/mesh_query.h"
 #include "engine/vec3.h"
 
 namespace grains {
@@ -51,12 +53,14 @@ class MeshShape {
   // The welded mesh the shape measures (triangles of zero area dropped; inward closed meshes
   // turned outward), e.g. to write it beside a run's output.
   const Mesh& mesh() const { return mesh_; }
+  // The shape's arrays in the shared queries' form (engine/mesh_query.h), pointing into this
+  // shape: valid while it lives. A device's copy takes node_count() nodes, triangle_count()
+  // triangles and mesh().vertices.size() vertices from it.
+  gr_mesh view() const;
+  size_t node_count() const { return nodes_.size(); }
 
  private:
-  struct Node {
-    float lo[3], hi[3];
-    int first, count;  // leaf: triangles [first, first + count); inner: count 0, children first, first + 1
-  };
+  using Node = gr_mesh_node;
   Mesh mesh_;
   std::vector<std::array<int, 3>> tri_;  // in hierarchy order
   std::vector<Vec3> face_n_;             // unit normal per triangle (hierarchy order)

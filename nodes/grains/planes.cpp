@@ -24,9 +24,13 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   std::vector<gr_collider>& shapes = plane_colliders_;
   shapes.resize(collider_count);
   for (size_t c = 0; c < collider_count; ++c) shapes[c] = to_gr(colliders[c]);
-  // use_opencl: analytic colliders' planes are found on the device (a mesh's distance is the
-  // host's alone)
-  if (device && !any_mesh(colliders, collider_count)) {
+  // use_opencl: the planes are found on the device, with the colliders' meshes there
+  // (meshes_here decides)
+  if (device) {
+    std::vector<std::shared_ptr<const MeshShape>>& meshes = device_meshes_;
+    meshes.resize(collider_count);
+    for (size_t c = 0; c < collider_count; ++c) meshes[c] = colliders[c].shape.mesh;
+    open_device().set_meshes(meshes);
     const bool stay = device->entries_stay;
     const bool rows_stay = stay && device->rows_stay;
     open_device().find_planes(shapes.data(), collider_count, o, query_scale, P, p, radius,
@@ -42,24 +46,12 @@ void GrainsSolver::find_planes(const float* P, const float* p, const Vec3& origi
   plane_rows_there_ = device_.plane_rows_stale = false;
   // Two passes: count (row sizes), then fill the compact rows; each grain writes only its own
   // row
+  std::vector<const void*> meshes(collider_count);
+  for (size_t c = 0; c < collider_count; ++c) meshes[c] = colliders[c].shape.mesh.get();
+  const int count = static_cast<int>(collider_count);
   auto nearest = [&](long i, float* dist, float* nrm, int32_t* idx) {
-    if (!(inv_mass_[i] > 0.0f)) return 0;
-    float x[3];
-    gr_plane_world(p + 3 * i, o, x);
-    const float range = gr_plane_range(query_scale, radius[i], p + 3 * i, P + 3 * i);
-    int count = 0;
-    for (size_t c = 0; c < collider_count; ++c) {
-      float d, nc[3];
-      if (shapes[c].shape.kind == GR_SHAPE_MESH) {
-        Vec3 nm;
-        d = colliders[c].distance({x[0], x[1], x[2]}, &nm, range);
-        nc[0] = nm.x, nc[1] = nm.y, nc[2] = nm.z;
-      } else {
-        d = gr_collider_distance(&shapes[c], x, nc);
-      }
-      count = gr_plane_insert(d, nc, static_cast<int>(c), range, dist, nrm, idx, count);
-    }
-    return count;
+    return gr_plane_nearest(shapes.data(), count, o, query_scale, radius[i], inv_mass_[i],
+                            p + 3 * i, P + 3 * i, dist, nrm, idx, meshes.data());
   };
   plane_offsets_.resize(n + 1);
   uint32_t* offsets = plane_offsets_.data();
@@ -98,6 +90,12 @@ bool GrainsSolver::any_mesh(const ColliderState* colliders, size_t count) {
   for (size_t c = 0; c < count; ++c)
     if (colliders[c].shape.kind == ShapeKind::Mesh) return true;
   return false;
+}
+
+bool GrainsSolver::meshes_here(const GrainsSettings& s, const ColliderState* colliders,
+                               size_t count) {
+  return any_mesh(colliders, count) &&
+         !(s.use_opencl && !s.host_mesh && open_device().meshes_there());
 }
 
 }  // namespace grains

@@ -829,7 +829,8 @@ static bool jacobi_chain(const GrainsSettings& s) {
 bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                                     size_t collider_count) {
   if (!s.use_opencl || (s.contact_solver != kContactGaussSeidel && !jacobi_chain(s)) ||
-      s.host_finish || s.mass_shock() == MassShock::Global || any_mesh(colliders, collider_count))
+      s.host_finish || s.mass_shock() == MassShock::Global ||
+      meshes_here(s, colliders, collider_count))
     return false;
   opencl::Iterations& device = open_device();
   return device.builds_contacts() && device.sleeps_there();
@@ -924,12 +925,12 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
 // holds (SubstepEnd::keep_velocity). A stage that reads the start anyway (the
 // host's search of rows, host_p) brings it then.
 bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
-                               const ColliderState* colliders, size_t collider_count) const {
+                               const ColliderState* colliders, size_t collider_count) {
   // jacobi's: where its chain runs there (jacobi_chain; the shapes need primitives, the impact
   // data keep the end here)
   return s.use_opencl && (s.contact_solver == kContactGaussSeidel || jacobi_chain(s)) &&
          !s.resend_start && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
-         !any_mesh(colliders, collider_count);
+         !meshes_here(s, colliders, collider_count);
 }
 
 // the held start into d.P and d.v (world) and, once bind_inputs has set it, P0_ (the substep's
@@ -1009,7 +1010,7 @@ void GrainsSolver::open_sums(SubstepContext& c) {
   // update_planes() and iterate() take them back here where it does not after all
   c.impacts_here = c.impacts && !(s.use_opencl && !s.host_finish && !c.shapes_here &&
                                   (s.contact_solver == kContactGaussSeidel || c.jacobi_there) &&
-                                  !any_mesh(c.colliders, c.collider_count));
+                                  !meshes_here(s, c.colliders, c.collider_count));
   if (c.impacts) {
     collider_dx_.assign(3 * GR_MAX_PLANES * n, 0.0f);
     c.acc.collider_dx = collider_dx_.data();
@@ -1215,12 +1216,12 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
                                   (!c.s.use_opencl || open_device().builds_contacts())
                             : jacobi_planes_stay(c);
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
-  // the device's planes take the predicted positions there; the host's (a mesh collider's)
-  // read them here
-  const bool device_planes = c.s.use_opencl && !any_mesh(c.colliders, c.collider_count);
+  // the device's planes take the predicted positions there; the host's (a mesh collider whose
+  // queries it makes: meshes_here) read them here
+  const bool device_planes = c.s.use_opencl && !meshes_here(c.s, c.colliders, c.collider_count);
   const float* p = device_planes ? p_for_device(c, device.p_there) : host_p(c);
   find_planes(P0_, p, c.origin, c.colliders, c.collider_count, c.s.neighbor_query_scale, c.threads,
-              c.s.use_opencl ? &device : nullptr);
+              device_planes ? &device : nullptr);
   // the device's planes took the predicted positions (the solve copies them there); the impact
   // data its end would make read them there (else they are made here)
   if (first && planes_on_device_) p_on_device_ = true;
@@ -1314,12 +1315,12 @@ bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
 // gauss_seidel's does; carry_start takes the next start from it), where nothing between them
 // runs here: no rigid shapes projected here, no rows or planes found again during the iterations
 // (jacobi_whole; Chebyshev's step is made there too), no impact data against a mesh collider
-// (whose final collision test is the host's: the momenta are made there, from the end), no
-// contact history made here (host_history), and none of the test switches send_history_p,
-// host_predict and host_finish.
-bool GrainsSolver::jacobi_on_device(const SubstepContext& c) const {
+// whose queries the host makes (meshes_here: its final collision test, and so the momenta, are
+// the host's), no contact history made here (host_history), and none of the test switches
+// send_history_p, host_predict and host_finish.
+bool GrainsSolver::jacobi_on_device(const SubstepContext& c) {
   return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_here &&
-         !(c.d.impact_impulse && any_mesh(c.colliders, c.collider_count));
+         !(c.d.impact_impulse && meshes_here(c.s, c.colliders, c.collider_count));
 }
 
 // The substep's end made on the device after its iterations (write_back takes what it wrote):

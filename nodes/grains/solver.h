@@ -112,6 +112,10 @@ struct GrainsSettings {
   // its own, even where the device projects them (SubstepContext::shapes_here; the tests compare
   // the two)
   bool host_shapes = false;
+  // use_opencl: a mesh collider's planes, final collision test, impact data and sleepers' wake
+  // made on the host, even where the device makes them (GrainsSolver::meshes_here; the tests
+  // compare the two)
+  bool host_mesh = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -280,8 +284,8 @@ class GrainsSolver {
   // Whether the device can make the grains node's whole sleeping test around a substep with
   // these settings and colliders (GrainsData::sleep): gauss_seidel's substep on the device,
   // ended there with its velocities (no host_finish), no global mass
-  // shock, no mesh collider (whose distance is the host's), a device with the rows' kernels
-  // that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
+  // shock, no mesh collider whose queries the host makes (meshes_here), a device with the rows'
+  // kernels that builds the contact list, and no GRAINS_OPENCL_HOST_SLEEP=1.
   bool sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                         size_t collider_count);
   // whether the device holds the test's state of n grains, as the last substep left it, and
@@ -360,8 +364,8 @@ class GrainsSolver {
   // shared functions read them
   gr_shapes shape_arrays(const gr_params& prm);
   // P, p in the substep's coordinates, world = those + origin (planes.cpp). device: found on
-  // the OpenCL device when every collider is analytic; p_there: p is the positions the device's
-  // search took, radius_there: radius_ its radii
+  // the OpenCL device (null: here; with a mesh only where !meshes_here); p_there: p is the
+  // positions the device's search took, radius_there: radius_ its radii
   // entries_stay: the host reads no entry this substep but through sync_planes (a gauss_seidel
   // list the device builds, no impact data, no rigid shapes; or jacobi_planes_stay)
   struct DevicePlanes {
@@ -370,8 +374,12 @@ class GrainsSolver {
   void find_planes(const float* P, const float* p, const Vec3& origin,
                    const ColliderState* colliders, size_t collider_count, float query_scale,
                    int threads, const DevicePlanes* device);
-  // whether one of the colliders is a mesh, whose planes the host finds (planes.cpp)
+  // whether one of the colliders is a mesh
   static bool any_mesh(const ColliderState* colliders, size_t count);
+  // whether one of the colliders is a mesh whose queries (its planes, final collision test,
+  // impact data and sleepers' wake) the host makes: use_opencl off, a device without double
+  // precision (engine/mesh_query.h), or host_mesh
+  bool meshes_here(const GrainsSettings& s, const ColliderState* colliders, size_t count);
 
   struct SubstepContext;  // the substep's stages' (solver.cpp)
 
@@ -422,7 +430,7 @@ class GrainsSolver {
   void device_passes(SubstepContext& c, float* x, int count, bool friction_after, bool whole,
                      const opencl::JacobiSolve* w = nullptr);
   opencl::SubstepEnd* finish_there(const SubstepContext& c, opencl::SubstepEnd* end);
-  bool jacobi_on_device(const SubstepContext& c) const;
+  bool jacobi_on_device(const SubstepContext& c);
   opencl::Iterations& open_device();
   opencl::IterationSizes device_sizes(const SubstepContext& c) const;
 
@@ -520,7 +528,7 @@ class GrainsSolver {
   Vec3 end_origin_;
   size_t held_ends_ = 0, held_starts_ = 0;
   bool start_stays(const GrainsData& d, const GrainsSettings& s, const ColliderState* colliders,
-                   size_t collider_count) const;
+                   size_t collider_count);
   void fetch_start(const SubstepContext& c);
   std::vector<uint8_t> carry_differs_;
   std::vector<gr_uint> carry_changed_;
@@ -741,6 +749,7 @@ class GrainsSolver {
   size_t planes_device_ = 0;             // planes_found_on_device()
   std::vector<int32_t> plane_collider_;  // (entries): collider index of each plane
   std::vector<gr_collider> plane_colliders_;  // the substep's colliders (find_planes)
+  std::vector<std::shared_ptr<const MeshShape>> device_meshes_;  // and their meshes (there)
   // explicit constraints: per-grain rows of (other endpoint, primitive), rebuilt each substep
   std::vector<uint32_t> con_offsets_;      // (n + 1)
   std::vector<uint32_t> con_other_, con_prim_;  // (2 m)

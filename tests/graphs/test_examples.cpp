@@ -401,7 +401,8 @@ TEST_CASE("target_sand: grains settle onto the surface of the model", "[graphs]"
   CHECK(d[d.size() * 9 / 10] < 0.03);
 }
 
-TEST_CASE("mesh_bowl: sand poured into a mesh bowl stays in it and heaps", "[graphs][mesh]") {
+// mesh_bowl with `sets` ("PARAM=VALUE") on its nodes
+static void check_mesh_bowl(const std::vector<std::string>& sets) {
   // The bowl is an open shell of 736 triangles inscribed in the sphere of radius R = 0.3 m about
   // c = (0, 0.3, 0), its rim at y = 0.3; it touches the ground at its lowest point. No grain is
   // in the wall: each is at least its radius from the triangles (less the final pass's 1e-3 r).
@@ -411,7 +412,7 @@ TEST_CASE("mesh_bowl: sand poured into a mesh bowl stays in it and heaps", "[gra
   // grains poured in 1.5 s come to rest by 2.5 s as a heap, not a level fill: the sand's top
   // within 0.1 m of the axis stands above its top 0.15-0.2 m out by more than tan 15 deg x the
   // 0.125 m between them (sand with friction 1 stands near 30 deg; a level fill has no slope).
-  auto sim = run("mesh_bowl", 36);
+  auto sim = run("mesh_bowl", 36, sets);
   const double pouring = sim->object(0).stats.kinetic_energy;
   for (int f = 37; f <= 60; ++f) sim->step_frame();
   const ParticleStore& pts = sim->object(0).pts;
@@ -439,6 +440,17 @@ TEST_CASE("mesh_bowl: sand poured into a mesh bowl stays in it and heaps", "[gra
   CHECK(inner_top - outer_top > std::tan(15 * M_PI / 180) * 0.125);
   // settling: a hundredth of the kinetic energy at the pour's end
   CHECK(sim->object(0).stats.kinetic_energy < 0.01 * pouring);
+}
+
+TEST_CASE("mesh_bowl: sand poured into a mesh bowl stays in it and heaps", "[graphs][mesh]") {
+  check_mesh_bowl({});
+}
+
+TEST_CASE("use_opencl: mesh_bowl on the OpenCL device: the sand stays in the mesh bowl and heaps",
+          "[graphs][mesh][opencl]") {
+  // the whole substep on PoCL's CPU device, the bowl's planes, final collision test and
+  // sleepers' wake made there (engine/mesh_query.h): the same bounds
+  check_mesh_bowl({"grains.use_opencl=true"});
 }
 
 // rigid_rocks with `setting` ("PARAM=VALUE") on its grains node

@@ -128,16 +128,9 @@ GR_INLINE int gr_final_collision(const gr_collider* c, const float* a, float* b,
   return 1;
 }
 
-/* The pass of one grain against `count` colliders in order (on the host each with its mesh,
- * meshes[c], null for an analytic shape): returns the last collider that acted, with its normal
- * in hit_n, or -1 when none did */
-#if defined(GR_OPENCL)
-#define GR_MESHES_PARAM
-#define GR_MESH_OF(c)
-#else
-#define GR_MESHES_PARAM , const void* const* meshes
-#define GR_MESH_OF(c) , meshes[c]
-#endif
+/* The pass of one grain against `count` colliders in order, each with its mesh
+ * (GR_MESH_OF_COLLIDER, engine/collider_shape.h). Returns the last collider that
+ * acted, with its normal in hit_n, or -1 when none did. */
 GR_INLINE int gr_final_collisions(const GR_GLOBAL gr_collider* colliders, int count, const float* a,
                                   float* b, float* v, float r, float mu, float static_threshold,
                                   float scale_kinetic, float* hit_n GR_MESHES_PARAM) {
@@ -150,7 +143,9 @@ GR_INLINE int gr_final_collisions(const GR_GLOBAL gr_collider* colliders, int co
 #else
     const gr_collider* col = &colliders[c];
 #endif
-    if (gr_final_collision(col, a, b, v, r, mu, static_threshold, scale_kinetic, n GR_MESH_OF(c))) {
+    GR_MESH_OF_COLLIDER(mesh, c);
+    if (gr_final_collision(col, a, b, v, r, mu, static_threshold, scale_kinetic,
+                           n GR_MESH_ARG(mesh))) {
       hit = c;
       for (k = 0; k < 3; ++k) hit_n[k] = n[k];
     }

@@ -73,13 +73,13 @@ GR_INLINE void gr_plane_surface(const float* p, const float* n, float d, const f
   gr_plane_world(xs, origin, world);
 }
 
-/* the device's search: grain i's planes among `count` analytic colliders (their world
- * distances, gr_collider_distance), into dist, nrm and idx; returns how many. The CPU's loop
- * (planes.cpp) takes a mesh's distance too, from its own code. */
+/* grain i's planes among `count` colliders (their world distances within its range, a mesh's
+ * exact there: gr_collider_distance_within; each collider's mesh GR_MESH_OF_COLLIDER's), into
+ * dist, nrm and idx; returns how many */
 GR_INLINE int gr_plane_nearest(GR_GLOBAL const gr_collider* colliders, int count,
-                               const float* origin, float query_scale, float radius,
-                               float inv_mass, const float* p, const float* P, float* dist,
-                               float* nrm, int* idx) {
+                               const float* origin, float query_scale, float radius, float inv_mass,
+                               const float* p, const float* P, float* dist, float* nrm,
+                               int* idx GR_MESHES_PARAM) {
   float x[3], range;
   int c, found = 0;
   if (!(inv_mass > 0.0f)) return 0;
@@ -88,7 +88,8 @@ GR_INLINE int gr_plane_nearest(GR_GLOBAL const gr_collider* colliders, int count
   for (c = 0; c < count; ++c) {
     const gr_collider col = colliders[c];
     float nc[3];
-    const float d = gr_collider_distance(&col, x, nc);
+    GR_MESH_OF_COLLIDER(mesh, c);
+    const float d = gr_collider_distance_within(&col, x, nc, range GR_MESH_ARG(mesh));
     found = gr_plane_insert(d, nc, c, range, dist, nrm, idx, found);
   }
   return found;

@@ -275,6 +275,14 @@ struct Iterations::Impl {
   // entries go to arrays[kPlaneOffsets], arrays[kPlane] and plane_collider
   cl_kernel plane_count = nullptr, plane_fill = nullptr;
   Buffer plane_colliders, plane_p;
+  // the colliders' meshes as words (Iterations::set_meshes, engine/mesh_query.h), which the
+  // planes, the final collision test and the sleeping test read with plane_colliders; the
+  // meshes they are (mesh_key, null for an analytic collider) and whether one is a mesh
+  Buffer mesh_words;
+  std::vector<int32_t> mesh_host;  // what went up, while it goes
+  std::vector<std::shared_ptr<const MeshShape>> mesh_key;
+  bool any_meshes = false;
+  const Buffer* meshes() const { return any_meshes ? &mesh_words : nullptr; }
   size_t plane_entries = 0;  // the entries the last find_planes found
   size_t plane_grains = 0;   // and the grains it searched
   // the rows and colliders of the planes a contact list was built from (keep_planes), for
@@ -304,7 +312,7 @@ struct Iterations::Impl {
       for (Buffer& b : *parts) b.release();
     for (Buffer* b : {&nb_P, &nb_radius, &nb_part, &nb_key, &nb_count, &nb_cursor, &nb_grains,
                       &nb_sorted, &nb_offsets, &nb_keys, &nb_indices, &nb_sums, &stats_P,
-                      &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p,
+                      &stats_part, &sleep_fast, &sleep_out, &plane_colliders, &plane_p, &mesh_words,
                       &force, &end_v, &patch_index, &patch_values, &start, &carry_P, &end_part,
                       &carry_from, &sleep_time, &sleep_anchor, &sleep_accel,
                       &sleep_contacts, &sleep_start, &sleep_start_v, &sleep_mass, &sleep_can,

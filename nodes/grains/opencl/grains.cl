@@ -278,7 +278,7 @@ __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
                                    int n, __global const float* dx,
                                    __global const int* plane_collider, __global int* collider_out,
                                    __global float* impulse, __global float* normal,
-                                   __global float* point) {
+                                   __global float* point, __global const int* meshes) {
   const int i = (int)get_global_id(0);
   if (i >= n) return;
   {
@@ -291,7 +291,7 @@ __kernel void gr_k_final_collision(gr_params prm, GR_GRAINS_ARGS,
                           start[3 * i + 2] + origin_z};
       const float mu = prm.friction_with_colliders * gr_attr(g.friction, i);
       hit = gr_final_collisions(colliders, count, a, b, v, g.radius[i], mu, prm.static_threshold,
-                                prm.scale_kinetic, hit_n);
+                                prm.scale_kinetic, hit_n, meshes);
       for (k = 0; k < 3; ++k) P_out[3 * i + k] = b[k], v_out[3 * i + k] = v[k];
     }
     if (collider_out)
@@ -764,6 +764,23 @@ __kernel void gr_k_seq_wave_starts(__global const gr_uint* ends, __global const 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #include "grid.h"
 
+/* A mesh collider's queries (engine/mesh_query.h, in double precision): the hooks
+ * engine/collider_shape.h declares, on the mesh's arrays here (gr_mesh_of). */
+#define GR_MESH_QUERIES
+#include "mesh_query.h"
+
+float gr_mesh_distance(const gr_mesh* mesh, const float* p, float* n, float within) {
+  return gr_mesh_query_distance(mesh, p, n, within);
+}
+
+float gr_mesh_crossing(const gr_mesh* mesh, const float* a, const float* b, float* n) {
+  return gr_mesh_query_crossing(mesh, a, b, n);
+}
+
+int gr_mesh_shell(const gr_mesh* mesh) {
+  return !mesh->closed;
+}
+
 /* work-item w of `items`: the smallest and largest finite coordinates and the largest radius of
  * grains w, w + items, ... into part[7 w ...] (lo xyz, hi xyz, r): the host takes the extremes,
  * which do not depend on the order they are met in */
@@ -1018,7 +1035,8 @@ __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __g
                                 __global float* accel, __global int* contacts,
                                 __global uchar* asleep, __global uchar* woken,
                                 __global const uchar* fast, int n,
-                                __global const gr_collider* colliders, int collider_count) {
+                                __global const gr_collider* colliders, int collider_count,
+                                __global const int* meshes) {
   const int k = (int)get_global_id(0);
   gr_sleep s;
   int c;
@@ -1027,7 +1045,8 @@ __kernel void gr_k_sleep_update(gr_sleep_params sp, __global const float* P, __g
                       0, asleep, woken, 0);
   for (c = 0; c < collider_count && asleep[k] && !woken[k]; ++c) {
     const gr_collider col = colliders[c];
-    if (!gr_collider_still(&col) && gr_sleep_collider_near(&sp, &s, k, &col, P)) woken[k] = 1;
+    GR_MESH_OF_COLLIDER(mesh, c);
+    if (!gr_collider_still(&col) && gr_sleep_collider_near(&sp, &s, k, &col, P, mesh)) woken[k] = 1;
   }
   if (offsets && asleep[k] && !woken[k])
     gr_sleep_rows_wake(&s, k, (int)gr_row_near(P, radius, offsets, indices, k, GR_SLEEP_KEPT),
@@ -1106,6 +1125,24 @@ __kernel __attribute__((reqd_work_group_size(GR_SHAPE_LANES, 1, 1))) void gr_k_s
     gr_shape_friction_apply(&s, p, c, l, centre, motion);
   }
 }
+#else
+/* no double precision: the host makes every mesh's queries (Iterations::meshes_there), and
+ * these are never reached */
+float gr_mesh_distance(const gr_mesh* mesh, const float* p, float* n, float within) {
+  (void)mesh, (void)p, (void)within;
+  if (n) n[0] = 0.0f, n[1] = 1.0f, n[2] = 0.0f;
+  return 1e30f;
+}
+
+float gr_mesh_crossing(const gr_mesh* mesh, const float* a, const float* b, float* n) {
+  (void)mesh, (void)a, (void)b, (void)n;
+  return 2.0f;
+}
+
+int gr_mesh_shell(const gr_mesh* mesh) {
+  (void)mesh;
+  return 0;
+}
 #endif
 
 /* An exclusive prefix sum of n counts, in place, with the total at [n]: gr_k_scan_blocks sums
@@ -1151,19 +1188,20 @@ __kernel void gr_k_scan_apply(__global gr_uint* x, int n, int block, __global co
 #define GR_PLANE_ARGS                                                                        \
   __global const gr_collider *colliders, int count, float ox, float oy, float oz,            \
       float query_scale, __global const float *P, __global const float *p,                   \
-      __global const float *radius, __global const float *inv_mass, int n
+      __global const float *radius, __global const float *inv_mass, int n,                  \
+      __global const int *meshes
 
 /* grain i's planes into dist, nrm, idx, and p's copy into pi; returns how many */
 GR_INLINE int gr_device_planes(__global const gr_collider* colliders, int count, float ox,
                                float oy, float oz, float query_scale, __global const float* P,
                                __global const float* p, __global const float* radius,
-                               __global const float* inv_mass, int i, float* pi, float* dist,
-                               float* nrm, int* idx) {
+                               __global const float* inv_mass, __global const int* meshes, int i,
+                               float* pi, float* dist, float* nrm, int* idx) {
   const float origin[3] = {ox, oy, oz};
   const float Pi[3] = {P[3 * i], P[3 * i + 1], P[3 * i + 2]};
   pi[0] = p[3 * i], pi[1] = p[3 * i + 1], pi[2] = p[3 * i + 2];
   return gr_plane_nearest(colliders, count, origin, query_scale, radius[i], inv_mass[i], pi, Pi,
-                          dist, nrm, idx);
+                          dist, nrm, idx, meshes);
 }
 
 __kernel void gr_k_plane_count(GR_PLANE_ARGS, __global gr_uint* counts) {
@@ -1172,7 +1210,7 @@ __kernel void gr_k_plane_count(GR_PLANE_ARGS, __global gr_uint* counts) {
   int idx[GR_MAX_PLANES];
   if (i >= n) return;
   counts[i] = (gr_uint)gr_device_planes(colliders, count, ox, oy, oz, query_scale, P, p, radius,
-                                        inv_mass, i, pi, dist, nrm, idx);
+                                        inv_mass, meshes, i, pi, dist, nrm, idx);
 }
 
 __kernel void gr_k_plane_fill(GR_PLANE_ARGS, __global const gr_uint* offsets, __global float* plane,
@@ -1182,8 +1220,8 @@ __kernel void gr_k_plane_fill(GR_PLANE_ARGS, __global const gr_uint* offsets, __
   float pi[3], dist[GR_MAX_PLANES], nrm[3 * GR_MAX_PLANES];
   int idx[GR_MAX_PLANES], found, k, a;
   if (i >= n || offsets[i + 1] == offsets[i]) return;
-  found = gr_device_planes(colliders, count, ox, oy, oz, query_scale, P, p, radius, inv_mass, i, pi,
-                           dist, nrm, idx);
+  found = gr_device_planes(colliders, count, ox, oy, oz, query_scale, P, p, radius, inv_mass,
+                           meshes, i, pi, dist, nrm, idx);
   for (k = 0; k < found; ++k) {
     const gr_uint e = offsets[i] + (gr_uint)k;
     const gr_collider col = colliders[idx[k]];

@@ -243,6 +243,10 @@ bool Iterations::shapes_there() {
   return impl_->bounds != nullptr;
 }
 
+bool Iterations::meshes_there() {
+  return shapes_there();  // (both need double precision, as the grid's kernels)
+}
+
 bool Iterations::builds_contacts() const {
   return impl_->builds_contacts;
 }
@@ -989,6 +993,7 @@ void Iterations::Impl::finish_substep(const gr_grains& g, const gr_params& prm,
                                    &impact_impulse, &impact_normal,  &impact_point};
     for (cl_uint a = 0; a < 6; ++a)
       set_buffer(c, kFirstOwn + 9 + a, impacts ? impact_args[a] : nullptr);
+    set_buffer(c, kFirstOwn + 15, colliders > 0 ? meshes() : nullptr);  // (set_meshes)
     launch(c, n);
     if (impacts) fetch_impacts(*end, slots);
   }

@@ -28,6 +28,10 @@
 #include "nodes/grains/kernels/sequential.h"
 #include "nodes/grains/kernels/sleep.h"
 
+namespace grains {
+class MeshShape;
+}
+
 namespace grains::opencl {
 
 // How much of each array run() reads: grains, neighbour entries, collider plane entries,
@@ -497,6 +501,12 @@ class Iterations {
   // whether the device projects rigid shapes (SequentialContacts::shapes): it has double
   // precision
   bool shapes_there();
+  // The colliders' meshes (null: an analytic shape), in the order of the colliders the planes,
+  // the final collision test and the sleeping test take: their arrays go up when the meshes
+  // differ from the last ones (each mesh once), for the queries there (engine/mesh_query.h).
+  void set_meshes(const std::vector<std::shared_ptr<const MeshShape>>& meshes);
+  // whether the device makes a mesh's queries: it has double precision
+  bool meshes_there();
 
  private:
   struct Impl;

@@ -2,11 +2,14 @@
 // kernels/planes.h). A work-item a grain counts its planes, a scan turns the counts into rows,
 // and a second pass fills them; the rows, entries and colliders come back, or stay there and
 // are compared there with those a contact list was built from.
+#include <cstring>
 #include <limits>
+#include <map>
 #include <stdexcept>
 #include <vector>
 
 #include "engine/buffer.h"
+#include "engine/mesh_shape.h"
 #include "nodes/grains/opencl/device_state.h"
 
 namespace grains::opencl {
@@ -58,9 +61,9 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
     arg(k, 0, m.plane_colliders), arg(k, 1, colliders_n);
     arg(k, 2, origin[0]), arg(k, 3, origin[1]), arg(k, 4, origin[2]), arg(k, 5, query_scale);
     arg(k, 6, Pb), arg(k, 7, pb), arg(k, 8, rb), arg(k, 9, wb);
-    arg(k, 10, items);
+    arg(k, 10, items), set_buffer(k, 11, m.meshes());
   }
-  arg(kc, 11, rows);
+  arg(kc, 12, rows);
   m.launch(kc, n);
   m.scan(rows, n);
   // with rows_stay only the last offset comes back: the number of entries
@@ -79,7 +82,7 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   if (entries == 0) return;
   m.arrays[kPlane].reserve(m.ctx, 9 * entries * f, m.largest);
   m.plane_collider.reserve(m.ctx, entries * sizeof(int), m.largest);
-  arg(kf, 11, rows), arg(kf, 12, m.arrays[kPlane]), arg(kf, 13, m.plane_collider);
+  arg(kf, 12, rows), arg(kf, 13, m.arrays[kPlane]), arg(kf, 14, m.plane_collider);
   m.launch(kf, n);
   if (!entries_stay) m.download(m.arrays[kPlane], plane->data(), 9 * entries * f);
   if (!rows_stay) m.download(m.plane_collider, which->data(), entries * sizeof(int));
@@ -96,6 +99,55 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   m.launch(k, n);
   m.download(m.plane_differs, &differs, sizeof differs);
   *same_as_kept = differs == 0;
+}
+
+void Iterations::set_meshes(const std::vector<std::shared_ptr<const MeshShape>>& meshes) {
+  Impl& m = *impl_;
+  if (meshes == m.mesh_key) return;
+  m.mesh_key = meshes;
+  m.any_meshes = false;
+  for (const auto& mesh : meshes) m.any_meshes = m.any_meshes || mesh != nullptr;
+  if (!m.any_meshes) return;
+  // a record a collider, then each mesh's arrays once (colliders may share one), as
+  // engine/mesh_query.h's gr_mesh_of reads them
+  static_assert(sizeof(gr_mesh_ref) == 13 * sizeof(int32_t) && sizeof(gr_mesh_node) == 32,
+                "the words as the device reads them");
+  const size_t record = sizeof(gr_mesh_ref) / sizeof(int32_t);
+  // (kept: the upload reads them after this returns)
+  std::vector<int32_t>& words = m.mesh_host;
+  words.assign(record * meshes.size(), 0);
+  auto add = [&](const void* data, size_t bytes) {
+    const size_t at = words.size();
+    if (at + bytes / 4 >= size_t(std::numeric_limits<int>::max()))
+      throw std::runtime_error("use_opencl: the collider meshes are too large for the device");
+    words.resize(at + bytes / 4);
+    if (bytes > 0) std::memcpy(words.data() + at, data, bytes);
+    return static_cast<int>(at);
+  };
+  std::map<const MeshShape*, gr_mesh_ref> placed;
+  for (size_t c = 0; c < meshes.size(); ++c) {
+    gr_mesh_ref ref{};
+    ref.nodes = -1;
+    const MeshShape* shape = meshes[c].get();
+    if (shape && placed.count(shape)) {
+      ref = placed[shape];
+    } else if (shape) {
+      const gr_mesh v = shape->view();
+      const size_t nt = shape->triangle_count(), nv = shape->mesh().vertices.size();
+      const size_t f = sizeof(float);
+      ref.nodes = add(v.nodes, shape->node_count() * sizeof(gr_mesh_node));
+      ref.tri = add(v.tri, 3 * nt * sizeof(int));
+      ref.vertices = add(v.vertices, 3 * nv * f);
+      ref.face_n = add(v.face_n, 3 * nt * f);
+      ref.edge_n = add(v.edge_n, 9 * nt * f);
+      ref.vertex_n = add(v.vertex_n, 3 * nv * f);
+      ref.closed = v.closed;
+      for (int k = 0; k < 3; ++k) ref.lo[k] = v.lo[k], ref.hi[k] = v.hi[k];
+      placed[shape] = ref;
+    }
+    std::memcpy(words.data() + record * c, &ref, sizeof ref);
+  }
+  m.upload(m.mesh_words, words.data(), words.size() * sizeof(int32_t));
 }
 
 void Iterations::fetch_planes(std::vector<float>* plane, std::vector<uint32_t>* offsets,

@@ -141,7 +141,7 @@ bool Iterations::sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows
     m.upload_once(m.plane_colliders, colliders, collider_count * sizeof(gr_collider));
   const int count_colliders = static_cast<int>(collider_count);
   // sp, P, v, radius, offsets, indices, awake, can, force, force_uniform, time, anchor, accel,
-  // contacts, asleep, woken, fast, n, colliders, collider_count
+  // contacts, asleep, woken, fast, n, colliders, collider_count, meshes
   cl_kernel update = m.kernel(m.sleep_update, "gr_k_sleep_update");
   arg(update, 0, sp), arg(update, 1, m.carry_P), arg(update, 2, m.end_v);
   arg(update, 3, m.arrays[kRadius]), set_buffer(update, 4, offsets);
@@ -152,6 +152,7 @@ bool Iterations::sleep_end(const gr_sleep_params& sp, size_t n, bool device_rows
   arg(update, 14, m.sleep_asleep), arg(update, 15, m.sleep_woken), arg(update, 16, m.sleep_fast);
   arg(update, 17, count), set_buffer(update, 18, collider_count ? &m.plane_colliders : nullptr);
   arg(update, 19, count_colliders);
+  set_buffer(update, 20, collider_count ? m.meshes() : nullptr);  // (set_meshes)
   m.launch(update, n);
   return true;
 }

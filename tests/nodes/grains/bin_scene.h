@@ -17,6 +17,7 @@ struct BinScene {
   // a ball of 4 cm radius that sweeps through the pile along x from 0.7 s to 0.8 s of the run,
   // still before and after
   bool pusher = false;
+  bool pusher_mesh = false;  // the ball as a lumpy closed mesh (graphs/data/rock.obj, r ~ 4 cm)
   // an attribute node after the grains node that sets `probed` to this expression each substep
   const char* probe = nullptr;
   const char* probed = "probe";
@@ -40,12 +41,14 @@ inline Graph bin_graph(const BinScene& b) {
        plane("zp", {0, 0, -1}, {far, 0, far + 0.15})});
   json colliders = {"ground", "xm", "xp", "zm", "zp"};
   if (b.pusher) {
-    nodes.push_back({{"name", "pusher"},
-                     {"type", "collider"},
-                     {"params",
-                      {{"shape", "sphere"},
-                       {"radius", 0.04},
-                       {"translate", {"-0.2 + 4 * min(max($ST - 0.7, 0), 0.1)", 0.04, 0}}}}});
+    json params = {{"shape", "sphere"},
+                   {"radius", 0.04},
+                   {"translate", {"-0.2 + 4 * min(max($ST - 0.7, 0), 0.1)", 0.04, 0}}};
+    if (b.pusher_mesh) {
+      params.erase("radius");
+      params["shape"] = "mesh", params["file"] = "../graphs/data/rock.obj", params["scale"] = 0.33;
+    }
+    nodes.push_back({{"name", "pusher"}, {"type", "collider"}, {"params", params}});
     colliders.push_back("pusher");
   }
   nodes.push_back({{"name", "sand"},

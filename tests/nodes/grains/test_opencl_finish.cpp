@@ -1,7 +1,7 @@
 // The substep's end on the OpenCL device (gr_k_finish, opencl::SubstepEnd): the
 // velocity update there, the final collision test there, its written positions kept there for
 // error control's overlap statistics, and the grains the host's final collision test moves
-// after it (a mesh collider) sent alone.
+// after it (a mesh collider whose queries the host makes) sent alone.
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cfloat>
@@ -125,27 +125,42 @@ TEST_CASE("use_opencl: the final collision test on the device and on the host af
   //  - An analytic box plate: the device runs the test (gr_k_final_collision) on what it wrote,
   //    from the same functions as the host, so check_finish finds the host's positions, bit for
   //    bit, and nothing goes up after it.
-  //  - The same plate as a triangle mesh, whose distance is the host's alone: the host's test
-  //    follows the device's end, and the 16 grains it moved go up alone for the statistics and
-  //    the sleeping test's counts, which must be those of the positions the host holds. Without
-  //    the statistics the sleeping test sends them.
+  //  - The same plate as a triangle mesh (a closed one: a solid), whose queries the device makes
+  //    too (engine/mesh_query.h, the functions MeshShape's own queries call): the same.
+  //  - An open sheet instead, 1 cm under the shot grains' centres (a shell, which has no inside:
+  //    a grain starting within r/2 of it leaves no trace to sweep, and only its path's crossing,
+  //    gr_mesh_crossing, puts it back on the side it came from), its queries on the device too:
+  //    the same.
+  //  - The mesh plate with its queries made on the host (host_mesh, as a device without double
+  //    precision has them): the host's test follows the device's end, and the 16 grains it moved
+  //    go up alone for the statistics and the sleeping test's counts, which must be those of the
+  //    positions the host holds. Without the statistics the sleeping test sends them.
   const float r = 0.04f, top = 0.005f;  // test::shot_plate's
-  for (const bool mesh : {false, true}) {
+  const char* const names[] = {"a box plate, ", "a mesh plate, ", "a sheet, ",
+                               "a mesh plate, its queries on the host, "};
+  for (const int variant : {0, 1, 2, 3}) {
+    const bool mesh = variant > 0, mesh_here = variant == 3;
     test::Scene sc = test::shot_plate(mesh);
+    const float face = variant == 2 ? 0.05f : top;  // the surface the grains stop on
+    if (variant == 2) {
+      std::string problem;
+      sc.colliders[0].shape.mesh = MeshShape::build(test::quad_mesh(1.0f, face), &problem);
+      REQUIRE(!sc.colliders[0].shape.mesh->closed());
+    }
+    sc.s.host_mesh = mesh_here;
     REQUIRE((!mesh || sc.colliders[0].shape.mesh));
     for (const bool with_stats : {true, false}) {
-      INFO((mesh ? "a mesh plate, " : "a box plate, ")
-           << (with_stats ? "with" : "without") << " the overlap statistics");
+      INFO(names[variant] << (with_stats ? "with" : "without") << " the overlap statistics");
       sc.with_stats = with_stats;
       bool there = false;
       test::Scene end = sc;
       end.s.host_finish = false;
       end.substep();
-      CHECK(end.solver.collided_on_device() == !mesh);
-      for (size_t i = 0; i < sc.size(); i += 2) CHECK(end.P[3 * i + 1] > top + r - 1e-6f);
+      CHECK(end.solver.collided_on_device() == !mesh_here);
+      for (size_t i = 0; i < sc.size(); i += 2) CHECK(end.P[3 * i + 1] > face + r - 1e-6f);
       const size_t moved = check_finish(sc, &there);
       INFO(moved << " grains moved by the host's final collision test after the device's end");
-      CHECK(moved == (mesh ? 16u : 0u));
+      CHECK(moved == (mesh_here ? 16u : 0u));
       CHECK(there);
     }
   }

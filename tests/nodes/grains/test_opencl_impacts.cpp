@@ -21,7 +21,7 @@ namespace {
 // test took away, v - v_loop, where the test acted; each side's velocities may differ within the
 // rounding of the velocity update (8 eps (|v| + |v_start| + dt g), test_opencl_finish.cpp) and of
 // the test's friction, so the momenta agree within m x 16 eps (|v| + |v_start| + dt g). `there`:
-// whether the device makes them (analytic colliders). Returns the slots filled.
+// whether the device makes them (its colliders' queries there). Returns the slots filled.
 // gauss_seidel's contacts' loads, or jacobi's sums of the planes' moves, (zeros to start: one
 // 4-byte word, sent for the latter) stay there.
 size_t compare(const test::Scene& start, bool there) {
@@ -83,12 +83,17 @@ TEST_CASE("use_opencl: the device makes the impact data as the host does",
   }
   // test::shot_plate's 16 grains shot at 30 m/s through a plate thinner than their radius:
   // the final collision test puts each back on top and takes its speed into the plate away,
-  // which is all of its impact (each one slot). An analytic box: the device's test and impact
-  // data; the same plate as a mesh, whose distance is the host's alone: the host's.
-  for (const bool mesh : {false, true}) {
-    INFO((mesh ? "a mesh plate" : "a box plate"));
+  // which is all of its impact (each one slot). An analytic box, and the same plate as a mesh
+  // (engine/mesh_query.h there): the device's test and impact data; the mesh plate with its
+  // queries on the host (host_mesh, as a device without double precision has them): the
+  // host's.
+  for (const int variant : {0, 1, 2}) {
+    const bool mesh = variant > 0, mesh_here = variant == 2;
+    INFO((mesh ? (mesh_here ? "a mesh plate, its queries on the host" : "a mesh plate")
+               : "a box plate"));
     test::Scene pl = test::shot_plate(mesh);
+    pl.s.host_mesh = mesh_here;
     REQUIRE((!mesh || pl.colliders[0].shape.mesh));
-    CHECK(compare(pl, !mesh) == 16);
+    CHECK(compare(pl, !mesh_here) == 16);
   }
 }

@@ -14,6 +14,7 @@
 #include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/cloud.h"
+#include "tests/support/meshes.h"
 #include "tests/support/support.h"
 
 using namespace grains;
@@ -64,6 +65,44 @@ test::Scene crowd() {
   return sc;
 }
 
+// crowd()'s grains among triangle meshes: a closed sphere (320 triangles) and a closed box
+// (its faces split, welded again by MeshShape), both turned, scaled and moving, an open sheet
+// (a shell, tilted) and a mesh the sphere's collider shares with a second one, beside the
+// analytic incline: grains inside the solids, on both sides of the sheet
+test::Scene crowd_meshes() {
+  test::Scene sc = crowd();
+  std::string problem;
+  ColliderState ball = shape(ShapeKind::Mesh, "ball");
+  ball.shape.mesh = MeshShape::build(test::sphere_mesh({0, 0, 0}, 0.25f, 2), &problem);
+  ColliderState box = shape(ShapeKind::Mesh, "box mesh");
+  box.shape.mesh = MeshShape::build(test::box_mesh({0, 0, 0}, {0.6f, 0.3f, 0.4f}, true), &problem);
+  ColliderState sheet = shape(ShapeKind::Mesh, "sheet");
+  sheet.shape.mesh = MeshShape::build(test::quad_mesh(0.5f), &problem);
+  REQUIRE(ball.shape.mesh);
+  REQUIRE(box.shape.mesh);
+  REQUIRE(sheet.shape.mesh);
+  REQUIRE(ball.shape.mesh->closed());
+  REQUIRE(box.shape.mesh->closed());
+  REQUIRE(!sheet.shape.mesh->closed());
+  test::Scene out = sc;
+  out.colliders.clear();
+  out.collider_motion.clear();
+  out.add_collider(sc.colliders[0]);  // the incline
+  out.add_collider(box, [](float t) {
+    return Pose::from_trs({-0.4f + t, 0.3f, 0.2f}, {10, 20 + 90 * t, 30}, 1.3f);
+  });
+  out.add_collider(ball, [](float t) {
+    return Pose::from_trs({0.5f, 0.4f - 2 * t, -0.3f}, {0, 0, 0}, 0.9f);
+  });
+  out.add_collider(sheet, [](float t) {
+    return Pose::from_trs({0.2f, 0.5f, 0.3f}, {25, 40 * t, 10}, 1.1f);
+  });
+  out.add_collider(ball, [](float t) {
+    return Pose::from_trs({-0.5f, 0.5f + t, -0.5f}, {0, 30, 60}, 0.8f);
+  });
+  return out;
+}
+
 // one substep of `sc` on each backend: the same planes
 void same_planes(const test::Scene& sc) {
   test::Scene cpu = sc, dev = sc;
@@ -105,6 +144,22 @@ TEST_CASE("use_opencl: the device's collider planes are the CPU's, bit for bit",
     sc.s.update_collisions_during_iterations = true;
     same_planes(sc);
   }
+}
+
+TEST_CASE("use_opencl: a mesh collider's planes found on the device are the CPU's, bit for bit",
+          "[opencl][mesh]") {
+  // The meshes' queries (engine/mesh_query.h) run there on the arrays MeshShape built, in
+  // double precision without fused multiply-adds, as MeshShape's own queries run on the host:
+  // the same rows, normals, surface points and velocities, bit for bit, solid and shell alike,
+  // one mesh shared by two colliders.
+  test::Scene sc = crowd_meshes();
+  same_planes(sc);
+  // the same substep with the meshes' queries on the host (host_mesh): the host's planes
+  test::Scene here = sc;
+  here.s.use_opencl = true;
+  here.s.host_mesh = true;
+  here.substep();
+  CHECK(here.solver.planes_found_on_device() == 0);
 }
 
 TEST_CASE("use_opencl: the device compares the planes' rows and colliders with those it kept",

@@ -21,8 +21,9 @@ namespace {
 constexpr int kFrames = 36;
 
 Graph sleep_graph(bool error_control, bool pusher, const char* probe, const char* probed,
-                  bool jacobi) {
+                  bool jacobi, bool mesh) {
   test::BinScene b;
+  b.pusher_mesh = mesh;
   b.jacobi = jacobi;
   b.drop = 0.12;
   b.pusher = pusher;
@@ -63,9 +64,9 @@ struct Run {
 };
 
 Run run(bool error_control, bool pusher, const char* probe, const char* probed, bool host_sleep,
-        bool jacobi) {
+        bool jacobi, bool mesh) {
   test::ScopedEnv host("GRAINS_OPENCL_HOST_SLEEP", host_sleep ? "1" : "0");
-  Simulation sim(sleep_graph(error_control, pusher, probe, probed, jacobi), 1);
+  Simulation sim(sleep_graph(error_control, pusher, probe, probed, jacobi, mesh), 1);
   Run r;
   for (int f = 0; f < kFrames; ++f) {
     sim.step_frame();
@@ -93,26 +94,29 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
   // for bit. The device makes every substep's test, those of the ball's sweep too; where no
   // other node reads them, each substep but a frame's first starts from the end held there.
   // With contact_solver jacobi too (its substep chained on the device, jacobi_on_device), with
-  // error control and the ball.
+  // error control and the ball; and the ball as a mesh (a lumpy closed one, whose queries the
+  // device makes too: engine/mesh_query.h).
   register_builtin_nodes();
   struct Case {
     bool control, pusher;
     const char* probe;
     const char* probed = "probe";
     bool jacobi = false;
+    bool mesh = false;
   };
   // halves every grain's sleeptime from 0.9 s to 0.95 s, else writes it back as it was
   const char* halve = "$ST > 0.9 && $ST < 0.95 ? @sleeptime * 0.5 : @sleeptime";
   for (const Case c :
        {Case{true, false, nullptr}, Case{false, false, nullptr}, Case{true, true, nullptr},
         Case{true, false, "$TX"}, Case{false, false, halve, "sleeptime"},
-        Case{true, true, nullptr, "probe", true}}) {
+        Case{true, true, nullptr, "probe", true},
+        Case{true, true, nullptr, "probe", false, true}}) {
     INFO("error control " << c.control << ", pusher " << c.pusher << ", probe "
                           << (c.probe ? c.probe : "none") << " into " << c.probed
-                          << (c.jacobi ? ", jacobi" : ""));
+                          << (c.jacobi ? ", jacobi" : "") << (c.mesh ? ", a mesh pusher" : ""));
     const bool edits = std::string(c.probed) == "sleeptime";
-    const Run host = run(c.control, c.pusher, c.probe, c.probed, true, c.jacobi);
-    const Run device = run(c.control, c.pusher, c.probe, c.probed, false, c.jacobi);
+    const Run host = run(c.control, c.pusher, c.probe, c.probed, true, c.jacobi, c.mesh);
+    const Run device = run(c.control, c.pusher, c.probe, c.probed, false, c.jacobi, c.mesh);
     for (size_t f = 0; f < host.frames.size(); ++f) {
       INFO("frame " << f + 1);
       const Frame& a = host.frames[f];

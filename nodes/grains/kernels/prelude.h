@@ -10,6 +10,12 @@
 #if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
 
 #define GR_OPENCL 1 /* compiled as OpenCL C (nodes/grains/opencl/grains.cl) */
+/* the device has double precision, which the program's rows, rigid shapes, mesh queries,
+ * sleeping test and motion measure need (GR_NO_FP64: built as for a device without it,
+ * GRAINS_OPENCL_NO_FP64=1, opencl/device.cpp) */
+#if defined(cl_khr_fp64) && !defined(GR_NO_FP64)
+#define GR_DOUBLES 1
+#endif
 #define GR_GLOBAL __global
 #define GR_INLINE static inline
 #define GR_HOT static inline

@@ -16,7 +16,7 @@
 /* the grains [first, end): touching pairs (added to *contacts), the largest overlap (into
  * *largest) and the overlaps' sum (added to *sum, in row order); on a device with double
  * precision only (a program without it has none of the rows' kernels) */
-#if !defined(GR_OPENCL) || defined(cl_khr_fp64)
+#if !defined(GR_OPENCL) || defined(GR_DOUBLES)
 GR_INLINE void gr_row_overlaps(const GR_GLOBAL float* P, const GR_GLOBAL float* radius,
                                const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL gr_uint* indices,
                                int first, int end, double* contacts, float* largest, double* sum) {

@@ -275,7 +275,11 @@ cl_program build_program(cl_context ctx, cl_device_id d, const std::vector<Sourc
     *log = "clCreateProgramWithSource failed (" + std::to_string(status) + ")";
     return nullptr;
   }
-  const std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt";
+  std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt";
+  // the program as a device without double precision has it (kernels/prelude.h, GR_DOUBLES):
+  // the host's stages in place of those that need it, for testing them where every device has it
+  const char* no_fp64 = std::getenv("GRAINS_OPENCL_NO_FP64");
+  if (no_fp64 && std::string(no_fp64) == "1") options += " -D GR_NO_FP64";
   status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
   size_t n = 0;
   clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);

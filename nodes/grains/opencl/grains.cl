@@ -760,7 +760,7 @@ __kernel void gr_k_seq_wave_starts(__global const gr_uint* ends, __global const 
  * filled. Integer atomics only count: a cell's grains may sit in any order, and a row, sorted by
  * unique keys, does not depend on it. Double precision is the pair test's (engine/pair_test.h);
  * a device without it builds the rows on the host. */
-#ifdef cl_khr_fp64
+#ifdef GR_DOUBLES
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #include "grid.h"
 

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
 #include "tests/support/support.h"
 
@@ -482,6 +483,52 @@ TEST_CASE("use_opencl: the same graph gives the same frames run to run", "[openc
     auto one = pour(true, 6, {set}, 1), two = pour(true, 6, {set}, 2);
     CHECK(array(*one, "P") == array(*two, "P"));
     CHECK(array(*one, "v") == array(*two, "v"));
+  }
+}
+
+TEST_CASE("use_opencl on a device without double precision: the host's stages, the same frames",
+          "[opencl][mesh][shape]") {
+  // A device without cl_khr_fp64 has none of the kernels that need doubles (the neighbour rows,
+  // rigid shapes, mesh queries, the sleeping test, the motion measure: kernels/prelude.h,
+  // GR_DOUBLES); the host makes those stages with the same functions. GRAINS_OPENCL_NO_FP64=1
+  // builds PoCL's program as for such a device: the solver finds none of them there, and
+  // mesh_bowl (a mesh collider, sleeping, error control) and rigid_rocks (rigid shapes, jacobi's
+  // clumping) write the same frames, bit for bit, as with them there. Before 2026-12-05 such a
+  // program did not build at all (kernels/row_stats.h).
+  register_builtin_nodes();
+  {
+    test::ScopedEnv no("GRAINS_OPENCL_NO_FP64", "1");
+    opencl::Iterations device;
+    CHECK(!device.shapes_there());
+    CHECK(!device.meshes_there());
+    CHECK(!device.sleeps_there());
+  }
+  {
+    opencl::Iterations device;  // the premise: PoCL's device has them
+    REQUIRE(device.meshes_there());
+    REQUIRE(device.sleeps_there());
+  }
+  for (const char* name : {"mesh_bowl", "rigid_rocks"}) {
+    INFO(name);
+    auto frames = [&](bool doubles) {
+      test::ScopedEnv no("GRAINS_OPENCL_NO_FP64", doubles ? "0" : "1");
+      Graph g = load_graph(test::source_dir() + "/graphs/" + name + ".json",
+                           {parse_override("grains.use_opencl=true")});
+      Simulation sim(g, 1);
+      std::vector<std::vector<float>> out;
+      for (int f = 0; f < 24; ++f) {
+        sim.step_frame();
+        out.push_back(array(sim, "P"));
+        out.push_back(array(sim, "v"));
+      }
+      return out;
+    };
+    const auto with = frames(true), without = frames(false);
+    REQUIRE(with.size() == without.size());
+    for (size_t k = 0; k < with.size(); ++k) {
+      INFO((k % 2 ? "v" : "P") << " of frame " << k / 2 + 1);
+      CHECK(with[k] == without[k]);
+    }
   }
 }
 

@@ -5,6 +5,7 @@
 
 #include "nodes/grains/opencl/iterations.h"
 #include "tests/nodes/grains/grains_harness.h"
+#include "tests/support/meshes.h"
 
 using namespace grains;
 
@@ -61,36 +62,56 @@ TEST_CASE("use_opencl: what crosses between the host and the device each substep
   // reads the partial results of its reductions, 1,024 runs each: the overlap statistics (3
   // doubles a run), the rows' box (7 floats), the rows' reach (1 float) and the Verlet test's
   // largest move (1 float, GrainsSolver::keep_rows), 61,440 B.
-  test::Scene sc = test::layered_block(true);
-  const double n = double(sc.size()), colliders = double(sc.colliders.size());
-  const double runs = 1024 * (3 * 8 + 7 * 4 + 4 + 4);
-  int built = 0, kept = 0;
-  for (int k = 0; k < 120; ++k) {
-    const opencl::Traffic before = sc.solver.device_traffic();
-    const size_t lists = sc.solver.contact_lists_kept();
-    sc.substep();
-    const opencl::Traffic after = sc.solver.device_traffic();
-    const bool list_kept = sc.solver.contact_lists_kept() > lists;
-    (list_kept ? kept : built) += 1;
-    const double entries = sc.solver.collider_planes().offsets->back();  // (brought after)
-    const double sent = double(after.sent - before.sent),
-                 received = double(after.received - before.received);
-    INFO("substep " << k << (list_kept ? ", list kept" : ", list built") << ": sent " << sent / n
-                    << " B a grain, received " << received / n << ", " << entries
-                    << " plane entries");
-    CHECK(sc.solver.finished_on_device());
-    CHECK(sc.solver.collided_on_device());
-    CHECK(sc.solver.finish_changed() == 0);
-    CHECK(sc.solver.carried_start() == (k > 0));
-    CHECK(sc.solver.carried_changed() == 0);
-    CHECK(sc.solver.predicted_on_device());
-    CHECK(sent <= (k > 0 ? 0 : 24) * n + 12 + 136 * colliders + 1024);
-    CHECK(received <= 24 * n + runs + 4096);
+  // The same with the ground as a triangle mesh (a closed slab whose top is the plane), whose
+  // queries the device makes (engine/mesh_query.h): its arrays go up once, on the first substep
+  // (Iterations::set_meshes: a 52-byte record, its nodes, triangles, vertices and normals), and
+  // nothing else crosses for it.
+  for (const bool mesh : {false, true}) {
+    INFO((mesh ? "the ground as a mesh" : "the ground plane"));
+    test::Scene sc = test::layered_block(true);
+    double mesh_bytes = 0;
+    if (mesh) {
+      std::string problem;
+      ColliderState& ground = sc.colliders[0];
+      ground.shape.kind = ShapeKind::Mesh;
+      ground.shape.mesh =
+          MeshShape::build(test::box_mesh({0.3f, -0.5f, 0.3f}, {4, 1, 4}), &problem);
+      REQUIRE(ground.shape.mesh);
+      REQUIRE(ground.shape.mesh->closed());
+      const MeshShape& m = *ground.shape.mesh;
+      const double t = double(m.triangle_count()), v = double(m.mesh().vertices.size());
+      mesh_bytes = 52 + 32 * double(m.node_count()) + 4 * (3 * t + 3 * v + 3 * t + 9 * t + 3 * v);
+    }
+    const double n = double(sc.size()), colliders = double(sc.colliders.size());
+    const double runs = 1024 * (3 * 8 + 7 * 4 + 4 + 4);
+    int built = 0, kept = 0;
+    for (int k = 0; k < 120; ++k) {
+      const opencl::Traffic before = sc.solver.device_traffic();
+      const size_t lists = sc.solver.contact_lists_kept();
+      sc.substep();
+      const opencl::Traffic after = sc.solver.device_traffic();
+      const bool list_kept = sc.solver.contact_lists_kept() > lists;
+      (list_kept ? kept : built) += 1;
+      const double entries = sc.solver.collider_planes().offsets->back();  // (brought after)
+      const double sent = double(after.sent - before.sent),
+                   received = double(after.received - before.received);
+      INFO("substep " << k << (list_kept ? ", list kept" : ", list built") << ": sent " << sent / n
+                      << " B a grain, received " << received / n << ", " << entries
+                      << " plane entries");
+      CHECK(sc.solver.finished_on_device());
+      CHECK(sc.solver.collided_on_device());
+      CHECK(sc.solver.finish_changed() == 0);
+      CHECK(sc.solver.carried_start() == (k > 0));
+      CHECK(sc.solver.carried_changed() == 0);
+      CHECK(sc.solver.predicted_on_device());
+      CHECK(sent <= (k > 0 ? 0 : 24 * n + mesh_bytes) + 12 + 136 * colliders + 1024);
+      CHECK(received <= 24 * n + runs + 4096);
+    }
+    // the premise: both kinds of substep were measured
+    INFO(built << " substeps built a list, " << kept << " kept one");
+    CHECK(built >= 10);
+    CHECK(kept >= 10);
   }
-  // the premise: both kinds of substep were measured
-  INFO(built << " substeps built a list, " << kept << " kept one");
-  CHECK(built >= 10);
-  CHECK(kept >= 10);
 }
 
 TEST_CASE("use_opencl: the Jacobi path's pre-stabilization sends no contact history",

@@ -1005,7 +1005,7 @@ void GrainsSolver::open_sums(SubstepContext& c) {
     c.acc.friction_dx = friction_dx_.data();
   }
   c.impacts = c.d.impact_impulse && c.colliders_on;
-  // the device makes them at its end where it finds the planes (analytic colliders) and ends the
+  // the device makes them at its end where it finds the planes (meshes_here: none) and ends the
   // substep: gauss_seidel's (not with rigid shapes projected here), jacobi's chain;
   // update_planes() and iterate() take them back here where it does not after all
   c.impacts_here = c.impacts && !(s.use_opencl && !s.host_finish && !c.shapes_here &&
@@ -1325,9 +1325,9 @@ bool GrainsSolver::jacobi_on_device(const SubstepContext& c) {
 
 // The substep's end made on the device after its iterations (write_back takes what it wrote):
 // `end` set up for it (opencl::SubstepEnd). The final collision test there too, on
-// the colliders the device's planes took (every one analytic; a mesh's distance is the host's);
-// the end stays there where the caller lets it (GrainsData::may_hold_end) and nothing here reads
-// it: no final collision test here (a mesh), no constraints' strain.
+// the colliders the device's planes took (with their meshes: a mesh whose queries the host makes
+// keeps the planes here); the end stays there where the caller lets it (GrainsData::may_hold_end)
+// and nothing here reads it: no final collision test here, no constraints' strain.
 opencl::SubstepEnd* GrainsSolver::finish_there(const SubstepContext& c, opencl::SubstepEnd* end) {
   const size_t n = n_;
   finished_there_ = true;
@@ -1662,7 +1662,7 @@ void GrainsSolver::write_back(GrainsData& d, const GrainsSettings& s, const gr_g
   if (sleep_there_) {
     const bool device_rows = candidates_on_ && device_.rows_stale;
     // the colliders that moved this substep wake the sleepers they reach: the device's planes
-    // took every collider (analytic, as every collider of a test made there)
+    // took every collider, with its mesh (Iterations::set_meshes)
     if (!finished_there_ || (collider_count > 0 && !planes_on_device_) ||
         !device_.device->sleep_end(sleep_params_, d.n, device_rows,
                                    candidates_on_ && !device_rows ? &neighbors_ : nullptr,

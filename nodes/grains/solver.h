@@ -314,7 +314,7 @@ class GrainsSolver {
   // (opencl::Iterations::traffic; zero before)
   opencl::Traffic device_traffic() const;
   // whether the device ended the last substep (velocity update, SubstepEnd), whether
-  // its final collision test ran there too (every collider analytic), and how many grains the
+  // its final collision test ran there too (its planes found there), and how many grains the
   // host's final collision test moved after the device's end (their positions alone go up for
   // the overlap statistics)
   bool finished_on_device() const { return finished_there_; }
@@ -508,7 +508,7 @@ class GrainsSolver {
   // for its own; the device keeps those positions, and write_back lists in end_changed_ the
   // grains its final collision test moved, which contact_stats and the sleeping test send alone;
   // collided_there_: the final collision test ran there too (kernels/final_collision.h), on the
-  // colliders the device's planes took (every one analytic), unless the start velocity is kept
+  // colliders the device's planes took (with their meshes), unless the start velocity is kept
   bool finished_there_ = false, collided_there_ = false;
   // use_opencl: the substep's start positions (P0_) and velocities (d.v) made on the device from
   // what the last end there wrote (end_P_ and end_v_ hold the same floats), but for the grains

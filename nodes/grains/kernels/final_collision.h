@@ -17,10 +17,10 @@
  * contact planes, which already had its friction.
  *
  * The CPU runs it in GrainsSolver::write_back (through final_collision.cpp, compiled without
- * contraction), an OpenCL device in gr_k_final_collision (analytic colliders). The distances,
- * sweeps and poses are engine/collider_shape.h's, and like them these functions fuse no
- * multiply and add (GR_SHAPE_EXACT): a device moves a grain where the CPU does, bit for bit (its
- * velocity within the friction's rounding, gr_friction being fused there). */
+ * contraction), an OpenCL device in gr_k_final_collision. The distances, sweeps and poses are
+ * engine/collider_shape.h's (a mesh's engine/mesh_query.h's), and like them these functions
+ * fuse no multiply and add (GR_SHAPE_EXACT): a device moves a grain where the CPU does, bit for
+ * bit (its velocity within the friction's rounding, gr_friction being fused there). */
 #ifndef GRAINS_KERNELS_FINAL_COLLISION_H
 #define GRAINS_KERNELS_FINAL_COLLISION_H
 #include "contact.h"

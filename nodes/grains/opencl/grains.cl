@@ -265,9 +265,9 @@ __kernel void gr_k_finish(gr_params prm, GR_GRAINS_ARGS, __global const float* v
 }
 
 /* The final collision test (kernels/final_collision.h) of the substep's end gr_k_finish wrote
- * (P_out, world, and v_out), against `count` analytic colliders in order (0: no test): grain i
- * moved from its start (start, the substep's coordinates, plus the origin: the host's world
- * start, bit for bit, solver.cpp local_origin). A fixed grain is not tested. With collider_out
+ * (P_out, world, and v_out), against `count` colliders in order (0: no test; their meshes in
+ * `meshes`, Iterations::set_meshes): grain i moved from its start (start, the substep's
+ * coordinates, plus the origin: the host's world start, bit for bit, solver.cpp local_origin). A fixed grain is not tested. With collider_out
  * the impact data beside it (kernels/impact.h): grain i's slots from dx, its plane row and what
  * the test did to it, as GrainsSolver::write_back makes them, into collider_out, impulse, normal
  * and point (GR_MAX_PLANES a grain); null: none. */

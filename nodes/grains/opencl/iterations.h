@@ -134,7 +134,7 @@ struct SequentialContacts {
 // each; with keep_velocity the start's, as the device holds them, and not gr_update_velocity's).
 // force: gr_grains' force as the device reads it, a row a grain (3 n floats) or, with
 // force_uniform, one row for every grain; null: none. The written positions stay there for
-// row_overlaps() (written_there). With `colliders` (collider_count analytic colliders, the array
+// row_overlaps() (written_there). With `colliders` (collider_count colliders, the array
 // the substep's find_planes() took, and v_out) the final collision test follows there
 // (gr_k_final_collision), from the start as it went up.
 struct SubstepEnd {
@@ -382,8 +382,8 @@ class Iterations {
   // into s.contacts
   void fetch_contacts(const SequentialContacts& s);
 
-  // The collider planes (kernels/planes.h) of n grains among `count` analytic colliders (no
-  // mesh), found on the device: GrainsSolver::find_planes' rows, bit for bit. P and p (n x 3,
+  // The collider planes (kernels/planes.h) of n grains among `count` colliders (their meshes
+  // those set_meshes() last took), found on the device: GrainsSolver::find_planes' rows, bit for bit. P and p (n x 3,
   // the substep's coordinates, world = those + origin), radius and inv_mass (n); p_there: p is
   // the positions the device's last find_neighbours() or predict() took or made, radius_there:
   // radius is the search's radii (neither then goes up). Out: each grain's first entry and the

@@ -15,7 +15,8 @@ import subprocess
 import sys
 
 WANT = {"OMP_NUM_THREADS=1", "OMP_WAIT_POLICY=passive"}
-OWN = {"graph_schema", "vtk_client", "opencl_kernels_compile", "test_environment"}
+OWN = {"graph_schema", "vtk_client", "opencl_kernels_compile", "opencl_kernels_compile_without_fp64",
+       "test_environment"}
 
 ctest, build = sys.argv[1], sys.argv[2]
 listing = json.loads(subprocess.run([ctest, "--show-only=json-v1"], cwd=build, check=True,

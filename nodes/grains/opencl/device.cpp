@@ -212,12 +212,16 @@ bool host_sleep(bool* host, std::string* problem) {
   return switch_variable("GRAINS_OPENCL_HOST_SLEEP", host, problem);
 }
 
+bool no_fp64(bool* off, std::string* problem) {
+  return switch_variable("GRAINS_OPENCL_NO_FP64", off, problem);
+}
+
 bool chosen_device(DeviceChoice* out, std::string* problem) {
   *out = DeviceChoice{};
   uint64_t cap = 0, items = 0;
-  bool host = false, sleep = false;
+  bool host = false, sleep = false, fp32 = false;
   if (!buffer_cap(&cap, problem) || !sweep_items(&items, problem) ||
-      !host_contacts(&host, problem) || !host_sleep(&sleep, problem))
+      !host_contacts(&host, problem) || !host_sleep(&sleep, problem) || !no_fp64(&fp32, problem))
     return false;
   const char* env = std::getenv("GRAINS_OPENCL_DEVICE");
   const std::string text = env ? env : "";
@@ -276,10 +280,12 @@ cl_program build_program(cl_context ctx, cl_device_id d, const std::vector<Sourc
     return nullptr;
   }
   std::string options = "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt";
-  // the program as a device without double precision has it (kernels/prelude.h, GR_DOUBLES):
-  // the host's stages in place of those that need it, for testing them where every device has it
-  const char* no_fp64 = std::getenv("GRAINS_OPENCL_NO_FP64");
-  if (no_fp64 && std::string(no_fp64) == "1") options += " -D GR_NO_FP64";
+  // the program as a device without double precision has it (no_fp64; kernels/prelude.h,
+  // GR_DOUBLES): the host's stages in place of those that need it, for testing them where every
+  // device has it (a malformed value: refused by chosen_device, as no switch here)
+  bool fp32 = false;
+  std::string malformed;
+  if (no_fp64(&fp32, &malformed) && fp32) options += " -D GR_NO_FP64";
   status = clBuildProgram(program, 1, &d, options.c_str(), nullptr, nullptr);
   size_t n = 0;
   clGetProgramBuildInfo(program, d, CL_PROGRAM_BUILD_LOG, 0, nullptr, &n);

@@ -65,6 +65,13 @@ bool host_contacts(bool* host, std::string* problem);
 // Malformed: false, *problem says why. chosen_device() checks it too.
 bool host_sleep(bool* host, std::string* problem);
 
+// GRAINS_OPENCL_NO_FP64: 1 builds the program as for a device without double precision
+// (kernels/prelude.h, GR_DOUBLES: no rows, rigid shapes, mesh queries, sleeping test or motion
+// measure there; the host makes them, the same frames); 0 or unset builds it for the device. For
+// testing the host's stages on devices that all have doubles. Malformed: false, *problem says
+// why. chosen_device() checks it too.
+bool no_fp64(bool* off, std::string* problem);
+
 struct BuildResult {
   bool ok = false;
   double seconds = 0;  // wall time of the build

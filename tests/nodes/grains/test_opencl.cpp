@@ -577,4 +577,8 @@ TEST_CASE("use_opencl without an OpenCL platform, or with a device that is not t
   CHECK_THAT(test::read_text(log),
              Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_HOST_SLEEP: '2' is "
                              "neither 0 nor 1"));
+  CHECK(run_with("GRAINS_OPENCL_NO_FP64", "true", run, log) == 2);
+  CHECK_THAT(test::read_text(log),
+             Catch::Contains("/nodes/2/params/use_opencl: GRAINS_OPENCL_NO_FP64: 'true' is "
+                             "neither 0 nor 1"));
 }

@@ -165,31 +165,49 @@ static inline int gr_mesh_closest(const double* p, const double* a, const double
   return GR_MESH_FACE;
 }
 
+/* how far q lies outside [lo, hi] along one axis (0 inside) */
+static inline double gr_mesh_gap(double q, float lo, float hi) {
+  return q < lo ? lo - q : (q > hi ? q - hi : 0.0);
+}
+
 /* squared distance from p to the box [lo, hi] (0 inside) */
 static inline double gr_mesh_box_distance2(const float* lo, const float* hi, const double* p) {
   GR_MESH_EXACT
   double s = 0, e;
   int k;
   for (k = 0; k < 3; ++k) {
-    e = p[k] < lo[k] ? lo[k] - p[k] : (p[k] > hi[k] ? p[k] - hi[k] : 0.0);
+    e = gr_mesh_gap(p[k], lo[k], hi[k]);
     s += e * e;
   }
   return s;
 }
 
-/* the parameter where p + t d enters the box [lo, hi] within t in [0, 1] (slab test) into
- * *t_in; 0 when it never does there. inv_d: 1 / d per axis (infinite for a zero component). */
-static inline int gr_mesh_segment_box(const float* lo, const float* hi, const double* p,
+/* the same for a node's box, read where the node is (no copy of it: a hot path) */
+static inline double gr_mesh_node_distance2(GR_MESH_GLOBAL const gr_mesh_node* nd,
+                                            const double* p) {
+  GR_MESH_EXACT
+  double s = 0, e;
+  int k;
+  for (k = 0; k < 3; ++k) {
+    e = gr_mesh_gap(p[k], nd->lo[k], nd->hi[k]);
+    s += e * e;
+  }
+  return s;
+}
+
+/* the parameter where p + t d enters node nd's box within t in [0, 1] (slab test) into *t_in;
+ * 0 when it never does there. inv_d: 1 / d per axis (infinite for a zero component). */
+static inline int gr_mesh_segment_box(GR_MESH_GLOBAL const gr_mesh_node* nd, const double* p,
                                       const double* inv_d, double* t_in) {
   GR_MESH_EXACT
   double t0 = 0, t1 = 1, ta, tb, sw;
   int k;
   for (k = 0; k < 3; ++k) {
     if (GR_MESH_ISINF(inv_d[k])) {
-      if (p[k] < lo[k] || p[k] > hi[k]) return 0;
+      if (p[k] < nd->lo[k] || p[k] > nd->hi[k]) return 0;
       continue;
     }
-    ta = (lo[k] - p[k]) * inv_d[k], tb = (hi[k] - p[k]) * inv_d[k];
+    ta = (nd->lo[k] - p[k]) * inv_d[k], tb = (nd->hi[k] - p[k]) * inv_d[k];
     if (ta > tb) sw = ta, ta = tb, tb = sw;
     t0 = t0 < ta ? ta : t0;
     t1 = tb < t1 ? tb : t1;
@@ -250,14 +268,14 @@ static inline float gr_mesh_query_crossing(const gr_mesh* m, const float* af, co
   }
   stack[top++] = 0;
   while (top > 0) {
-    const gr_mesh_node nd = m->nodes[stack[--top]];
-    if (!gr_mesh_segment_box(nd.lo, nd.hi, p, inv_d, &t_in) || t_in > best) continue;
-    if (nd.count == 0) {
-      stack[top++] = nd.first;
-      stack[top++] = nd.first + 1;
+    GR_MESH_GLOBAL const gr_mesh_node* nd = m->nodes + stack[--top];
+    if (!gr_mesh_segment_box(nd, p, inv_d, &t_in) || t_in > best) continue;
+    if (nd->count == 0) {
+      stack[top++] = nd->first;
+      stack[top++] = nd->first + 1;
       continue;
     }
-    for (i = nd.first; i < nd.first + nd.count; ++i) {
+    for (i = nd->first; i < nd->first + nd->count; ++i) {
       gr_mesh_triangle(m, i, ta, tb, tc);
       hit = gr_mesh_segment_triangle(p, d, ta, tb, tc);
       if (hit > 0 && hit < best) best = hit, best_t = i; /* a start on the surface: no side */
@@ -291,10 +309,10 @@ static inline float gr_mesh_query_distance(const gr_mesh* m, const float* pf, fl
      * nodes; median splits of fewer than 2^31 triangles are under 32 deep */
     stack[top++] = 0;
     while (top > 0) {
-      const gr_mesh_node nd = m->nodes[stack[--top]];
-      if (gr_mesh_box_distance2(nd.lo, nd.hi, p) >= best) continue;
-      if (nd.count > 0) {
-        for (i = nd.first; i < nd.first + nd.count; ++i) {
+      GR_MESH_GLOBAL const gr_mesh_node* nd = m->nodes + stack[--top];
+      if (gr_mesh_node_distance2(nd, p) >= best) continue;
+      if (nd->count > 0) {
+        for (i = nd->first; i < nd->first + nd->count; ++i) {
           double d2;
           gr_mesh_triangle(m, i, ta, tb, tc);
           f = gr_mesh_closest(p, ta, tb, tc, c);
@@ -305,12 +323,9 @@ static inline float gr_mesh_query_distance(const gr_mesh* m, const float* pf, fl
         continue;
       }
       /* the nearer child on top of the stack */
-      a = nd.first, b = nd.first + 1;
-      {
-        const gr_mesh_node na = m->nodes[a], nb = m->nodes[b];
-        da = gr_mesh_box_distance2(na.lo, na.hi, p);
-        db = gr_mesh_box_distance2(nb.lo, nb.hi, p);
-      }
+      a = nd->first, b = nd->first + 1;
+      da = gr_mesh_node_distance2(m->nodes + a, p);
+      db = gr_mesh_node_distance2(m->nodes + b, p);
       a_first = da <= db;
       dnear = a_first ? da : db, dfar = a_first ? db : da;
       if (dfar < best) stack[top++] = a_first ? b : a;

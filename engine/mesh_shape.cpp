@@ -225,14 +225,15 @@ std::shared_ptr<const MeshShape> MeshShape::build(const Mesh& in, std::string* p
     s.face_n_[i] = face[t];
     for (int k = 0; k < 3; ++k) s.edge_n_[3 * i + k] = unit(edge_d[3 * t + k]);
   }
+  s.point_view();
   return shape;
 }
 
 static_assert(sizeof(Vec3) == 3 * sizeof(float) && sizeof(std::array<int, 3>) == 3 * sizeof(int),
               "the arrays as engine/mesh_query.h reads them");
 
-gr_mesh MeshShape::view() const {
-  gr_mesh m;
+void MeshShape::point_view() {
+  gr_mesh& m = view_;
   m.nodes = nodes_.data();
   m.tri = tri_.empty() ? nullptr : tri_[0].data();
   m.vertices = mesh_.vertices.empty() ? nullptr : &mesh_.vertices[0].x;
@@ -241,11 +242,10 @@ gr_mesh MeshShape::view() const {
   m.vertex_n = vertex_n_.empty() ? nullptr : &vertex_n_[0].x;
   for (int k = 0; k < 3; ++k) m.lo[k] = lo_[k], m.hi[k] = hi_[k];
   m.closed = closed_ ? 1 : 0;
-  return m;
 }
 
 float MeshShape::crossing(const Vec3& a, const Vec3& b, Vec3* normal) const {
-  const gr_mesh m = view();
+  const gr_mesh& m = view_;
   const float af[3] = {a.x, a.y, a.z}, bf[3] = {b.x, b.y, b.z};
   float n[3];
   const float t = gr_mesh_query_crossing(&m, af, bf, n);
@@ -254,7 +254,7 @@ float MeshShape::crossing(const Vec3& a, const Vec3& b, Vec3* normal) const {
 }
 
 float MeshShape::distance(const Vec3& p, Vec3* normal, float within) const {
-  const gr_mesh m = view();
+  const gr_mesh& m = view_;
   const float at[3] = {p.x, p.y, p.z};
   float n[3];
   const float d = gr_mesh_query_distance(&m, at, normal ? n : nullptr, within);

@@ -54,9 +54,10 @@ class MeshShape {
   // turned outward), e.g. to write it beside a run's output.
   const Mesh& mesh() const { return mesh_; }
   // The shape's arrays in the shared queries' form (engine/mesh_query.h), pointing into this
-  // shape: valid while it lives. A device's copy takes node_count() nodes, triangle_count()
-  // triangles and mesh().vertices.size() vertices from it.
-  gr_mesh view() const;
+  // shape: valid while it lives (made once by build(); a shape is not copied). A device's copy
+  // takes node_count() nodes, triangle_count() triangles and mesh().vertices.size() vertices
+  // from it.
+  const gr_mesh& view() const { return view_; }
   size_t node_count() const { return nodes_.size(); }
 
  private:
@@ -70,6 +71,13 @@ class MeshShape {
   Vec3 lo_, hi_;
   float bound_radius_ = 0;
   bool closed_ = false;
+  gr_mesh view_{};    // the arrays above, for the queries (view())
+  void point_view();  // view_ at them, once they are built
+
+ public:
+  MeshShape() = default;
+  MeshShape(const MeshShape&) = delete;  // view_ points into this shape's own arrays
+  MeshShape& operator=(const MeshShape&) = delete;
 };
 
 }  // namespace grains

@@ -554,6 +554,7 @@ void GrainsSolver::substep(GrainsData& d, const GrainsSettings& s, const Collide
   open_search(c);
   if (c.pairs_on) find_pairs(c, true);
   candidates_on_ = c.pairs_on;
+  c.rebuilds_there = rebuilds_there(c);
   if (c.colliders_on) update_planes(c, true);
   // contact history (load_history): each contact's slip left from earlier substeps
   const bool history = (c.pair_friction_pass || c.collider_friction_pass) &&
@@ -1088,7 +1089,10 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   const long ln = static_cast<long>(n);
   const int threads = c.threads;
   gr_grains& g = c.g;
-  if (!first && c.pair_friction_pass) {
+  // a rebuild during the device's iterations (rebuilds_there): the rows stay there, and what
+  // the iterations summed follows them there
+  const bool resident = !first && c.rebuilds_there;
+  if (!first && c.pair_friction_pass && !resident) {
     sync_rows();  // the sums and slips are carried over to the rebuilt rows here
     std::swap(prev_neighbors_, neighbors_);
   }
@@ -1098,8 +1102,8 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   // carry the sums over and use the search's own store.
   // use_opencl: the rows stay on the device when the substep reads them only there (their
   // number of entries comes back)
-  const bool stay =
-      first && rows_stay(c) && open_device().builds_contacts() && !(rows_read_sent_ > rows_bytes_);
+  const bool stay = resident || (first && rows_stay(c) && open_device().builds_contacts() &&
+                                 !(rows_read_sent_ > rows_bytes_));
   if (first && keep_rows(c)) {
     c.same_rows = true;
   } else {
@@ -1109,10 +1113,16 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
       hist_rows_ = neighbors_;
     // use_opencl: the rows found on the device (the same rows; the host's search where the
     // device cannot, opencl/iterations.h)
+    // (a rebuild there: the iterate there, as run() offers it)
+    const bool p_there = (first && predicted_there_) || resident;
     const bool on_device =
-        c.s.use_opencl &&
-        open_device().find_neighbours(p_for_device(c, first && predicted_there_), c.search_radius,
-                                      n, c.q, neighbors_, stay, first && predicted_there_);
+        c.s.use_opencl && open_device().find_neighbours(p_for_device(c, p_there), c.search_radius,
+                                                        n, c.q, neighbors_, stay, p_there);
+    if (!on_device && resident)
+      throw std::runtime_error(
+          "use_opencl: the device could not find the neighbour rows again during the iterations "
+          "(update_neighbors_during_iterations; too many for its largest buffer?); run it with "
+          "use_opencl off");
     if (!on_device)
       search_.find(host_p(c), c.search_radius, n, c.q, neighbors_,
                    first && c.pair_friction_pass ? &pair_normal_ : nullptr);
@@ -1163,6 +1173,15 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   pair_normal_it_.resize(row_stride_ * size_t(threads));
   if (first) {
     pair_normal_.assign(entries, 0u);  // the bits of 0.0f
+  } else if (resident) {
+    // carried there (Iterations::carry_pairs): the host's arrays sized for the new rows, their
+    // contents the device's
+    resize_for_rewrite(pair_normal_, entries);
+    resize_for_rewrite(pair_slip_, 3 * entries);
+    open_device().carry_pairs(n, entries, g.pair_slip != nullptr);
+    device_.sums_there = device_.sums_stale = true;
+    if (g.pair_slip) device_.slips_there = device_.slips_stale = true;
+    g.pair_slip = g.pair_slip ? pair_slip_.data() : nullptr;
   } else {
     // carry each pair's accumulated overlap over to its slot in the rebuilt rows
     std::vector<uint32_t> old;
@@ -1175,15 +1194,13 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     device_.slips_there = false;
     old_slip.swap(pair_slip_);
     pair_slip_.assign(3 * entries, 0.0f);
+    const float* was_slip = old_slip.empty() ? nullptr : old_slip.data();
 #pragma omp parallel for schedule(static) num_threads(threads)
     for (long i = 0; i < ln; ++i)
-      for (uint32_t k = neighbors_.offsets[i]; k < neighbors_.offsets[i + 1]; ++k)
-        for (uint32_t m = prev_neighbors_.offsets[i]; m < prev_neighbors_.offsets[i + 1]; ++m)
-          if (prev_neighbors_.indices[m] == neighbors_.indices[k]) {
-            pair_normal_[k] = old[m];
-            std::copy_n(&old_slip[3 * size_t(m)], 3, &pair_slip_[3 * size_t(k)]);
-            break;
-          }
+      gr_carry_pair_row(prev_neighbors_.offsets.data(), prev_neighbors_.indices.data(), old.data(),
+                        was_slip, neighbors_.offsets.data(), neighbors_.indices.data(),
+                        pair_normal_.data(), was_slip ? pair_slip_.data() : nullptr,
+                        static_cast<int>(i));
     g.pair_slip = pair_slip_.data();
   }
   c.acc.pair_iteration = pair_normal_it_.data();
@@ -1201,21 +1218,26 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   gr_grains& g = c.g;
   const bool friction = c.collider_friction_pass;
   const bool carry = !first && (friction || c.impacts);
+  // a rebuild during the device's iterations (rebuilds_there): the planes stay there, and what
+  // the iterations summed follows them there
+  const bool resident = !first && c.rebuilds_there;
   std::vector<float> old_slip;
-  if (carry) {
+  if (carry && !resident) {
     prev_plane_offsets_.swap(plane_offsets_);
     prev_plane_collider_.swap(plane_collider_);
     if (friction) prev_collider_normal_.swap(collider_normal_);
     if (friction) old_slip.swap(plane_slip_);
   }
   DevicePlanes device;
-  device.p_there = first && p_on_device_;
+  device.p_there = (first && p_on_device_) || resident;
   device.radius_there = first && searched_there_ && rows_true_radius_;
   device.entries_stay = c.s.contact_solver == kContactGaussSeidel
                             ? !c.impacts_here && !c.shapes_here &&
                                   (!c.s.use_opencl || open_device().builds_contacts())
                             : jacobi_planes_stay(c);
+  device.entries_stay = device.entries_stay || resident;
   device.rows_stay = device.entries_stay && !c.s.fetch_plane_rows;
+  if (resident && carry) open_device().hold_planes();
   // the device's planes take the predicted positions there; the host's (a mesh collider whose
   // queries it makes: meshes_here) read them here
   const bool device_planes = c.s.use_opencl && !meshes_here(c.s, c.colliders, c.collider_count);
@@ -1231,36 +1253,35 @@ void GrainsSolver::update_planes(SubstepContext& c, bool first) {
   g.plane_offsets = plane_offsets_.data();
   g.plane = plane_.data();
   if (friction) {
-    collider_normal_.assign(plane_offsets_[n], 0.0f);
+    if (resident)
+      resize_for_rewrite(collider_normal_, plane_offsets_[n]);
+    else
+      collider_normal_.assign(plane_offsets_[n], 0.0f);
     c.acc.collider = collider_normal_.data();
   }
   if (!carry) return;
   if (friction) {
-    plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
+    if (resident)
+      resize_for_rewrite(plane_slip_, 3 * size_t(plane_offsets_[n]));
+    else
+      plane_slip_.assign(3 * size_t(plane_offsets_[n]), 0.0f);
     g.plane_slip = plane_slip_.data();
   }
-  const bool impacts = c.impacts;
-#pragma omp parallel for schedule(static) num_threads(c.threads)
-  for (long i = 0; i < ln; ++i) {
-    constexpr int K = GR_MAX_PLANES;
-    float dx[3 * K];
-    float* slots = impacts ? collider_dx_.data() + 3 * K * i : nullptr;
-    if (slots) {
-      std::copy(slots, slots + 3 * K, dx);
-      std::fill(slots, slots + 3 * K, 0.0f);
-    }
-    const uint32_t b = plane_offsets_[i], pb = prev_plane_offsets_[i];
-    for (uint32_t e = b; e < plane_offsets_[i + 1]; ++e)
-      for (uint32_t m = pb; m < prev_plane_offsets_[i + 1]; ++m) {
-        if (prev_plane_collider_[m] != plane_collider_[e]) continue;
-        if (friction) {
-          collider_normal_[e] = prev_collider_normal_[m];
-          std::copy_n(&old_slip[3 * size_t(m)], 3, &plane_slip_[3 * size_t(e)]);
-        }
-        if (slots) std::copy(dx + 3 * (m - pb), dx + 3 * (m - pb + 1), slots + 3 * (e - b));
-        break;
-      }
+  if (resident) {
+    // (Iterations::carry_planes: the host's arrays sized for the new rows, their contents the
+    // device's)
+    open_device().carry_planes(n, friction, friction, c.impacts);
+    if (friction) device_.plane_slips_stale = true;
+    return;
   }
+#pragma omp parallel for schedule(static) num_threads(c.threads)
+  for (long i = 0; i < ln; ++i)
+    gr_carry_plane_row(prev_plane_offsets_.data(), prev_plane_collider_.data(),
+                       friction ? prev_collider_normal_.data() : nullptr,
+                       friction ? old_slip.data() : nullptr, plane_offsets_.data(),
+                       plane_collider_.data(), friction ? collider_normal_.data() : nullptr,
+                       friction ? plane_slip_.data() : nullptr,
+                       c.impacts ? collider_dx_.data() : nullptr, static_cast<int>(i));
 }
 
 // pins: their own group, after the averaged update and the shapes (kernels/pin.h)
@@ -1296,7 +1317,25 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 }
 
 bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
-  return jacobi_loop_there(c.s) && !c.shapes_here;
+  return (jacobi_loop_there(c.s) || c.rebuilds_there) && !c.shapes_here;
+}
+
+// use_opencl with jacobi: the rows and planes found again during the iterations
+// (update_*_during_iterations) on the device within its one call (JacobiSolve::rebuild), where
+// the substep's first search of rows ran there and left them there (no constrained pairs
+// dropped here, no test switch bringing them), its planes are found there (no mesh queried
+// here), no rigid shapes are projected here and none of the test switches that keep a stage
+// here is set
+bool GrainsSolver::rebuilds_there(const SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  const bool rows = s.update_neighbors_during_iterations && c.pairs_on;
+  const bool planes = s.update_collisions_during_iterations && c.colliders_on;
+  if (!s.use_opencl || s.contact_solver == kContactGaussSeidel || !(rows || planes) ||
+      c.shapes_here || (chebyshev_steps(s) && s.host_chebyshev) || s.host_history ||
+      s.fetch_plane_rows || s.host_rebuilds)
+    return false;
+  if (rows && !(rows_on_device_ && device_.rows_stale)) return false;
+  return !(planes && meshes_here(s, c.colliders, c.collider_count));
 }
 
 // jacobi_whole but for the shapes, which the device then projects too where it can
@@ -1443,6 +1482,18 @@ void GrainsSolver::iterate(SubstepContext& c) {
   if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
   opencl::ShapeArrays shapes;
   if (device_whole && c.shapes_on) w.shapes = shape_arrays_there(c, &shapes);
+  // the rows and planes found again there before each iteration but the first, run()'s
+  // arrays and sums rewritten for them
+  if (device_whole && c.rebuilds_there)
+    w.rebuild = [this, &c](gr_grains* g, opencl::IterationSizes* size, gr_normal_sums* acc) {
+      const bool sums_stay = size->sums_stay, collider_sums_stay = size->collider_sums_stay;
+      if (c.pairs_on && c.s.update_neighbors_during_iterations) find_pairs(c, false);
+      if (c.colliders_on && c.s.update_collisions_during_iterations) update_planes(c, false);
+      *g = c.g;  // (with the pins: the whole call's)
+      *size = device_sizes(c);
+      size->sums_stay = sums_stay, size->collider_sums_stay = collider_sums_stay;
+      *acc = c.acc;
+    };
   if (device_whole)
     device_passes(c, w.p_there ? p_.data() : host_p(c), iterations, false, true, &w);
   device_.p_there = device_whole;  // nothing here changes p_ before the history's save

@@ -116,6 +116,11 @@ struct GrainsSettings {
   // made on the host, even where the device makes them (GrainsSolver::meshes_here; the tests
   // compare the two)
   bool host_mesh = false;
+  // use_opencl with jacobi: the rows and planes found again during the iterations
+  // (update_*_during_iterations) between device calls of an iteration each, the host carrying
+  // their sums over, even where the device's whole call of them finds them there
+  // (GrainsSolver::rebuilds_there; the tests compare the two)
+  bool host_rebuilds = false;
 
   MassShock mass_shock() const {
     if (!enable_mass_shock_scaling) return MassShock::Off;
@@ -604,10 +609,11 @@ class GrainsSolver {
   // whether this substep's rows may stay on the device: it reads them nowhere else
   bool rows_stay(const SubstepContext& c) const;
   // use_opencl with jacobi: the iterations are one device call, nothing between them here (no
-  // rigid shapes projected here, no rows or planes found again during them; Chebyshev's step
-  // made there)
+  // rigid shapes projected here, no rows or planes found again during them but there:
+  // rebuilds_there; Chebyshev's step made there)
   bool jacobi_whole(const SubstepContext& c) const;
   static bool jacobi_loop_there(const GrainsSettings& s);
+  bool rebuilds_there(const SubstepContext& c);
   // the shapes as a device projects them (shape_arrays), into *out
   const opencl::ShapeArrays* shape_arrays_there(const SubstepContext& c, opencl::ShapeArrays* out);
   // ... and this substep's collider planes may stay there: no stage here reads them (no impact

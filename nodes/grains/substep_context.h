@@ -40,6 +40,9 @@ struct GrainsSolver::SubstepContext {
   // use_opencl with jacobi: the prediction, pre-stabilization, iterations and end chained on the
   // device (GrainsSolver::jacobi_on_device)
   bool jacobi_there = false;
+  // ... and the rows and planes found again during the iterations there, within the one call
+  // (GrainsSolver::rebuilds_there)
+  bool rebuilds_there = false;
 };
 
 // The final collision test of one grain moving from a to b (world) with velocity v, radius r and

@@ -132,4 +132,65 @@ GR_INLINE void gr_load_plane_slips(const GR_GLOBAL gr_uint* offsets, const GR_GL
   }
 }
 
+/* A rebuild of the rows during the iterations (update_neighbors_during_iterations): grain i's
+ * entries in its rebuilt row (offsets, indices) take what the iterations accumulated for the
+ * same neighbour in its row before (old_offsets, old_indices): the bits of its summed normal
+ * correction (old_sum into sum) and its carried slip (old_slip into slip, 3 floats an entry;
+ * both null: none); 0 for a neighbour new to the row. Copies only: the same bits on any side. */
+GR_INLINE void gr_carry_pair_row(const GR_GLOBAL gr_uint* old_offsets,
+                                 const GR_GLOBAL gr_uint* old_indices,
+                                 const GR_GLOBAL gr_uint* old_sum, const GR_GLOBAL float* old_slip,
+                                 const GR_GLOBAL gr_uint* offsets, const GR_GLOBAL gr_uint* indices,
+                                 GR_GLOBAL gr_uint* sum, GR_GLOBAL float* slip, int i) {
+  gr_uint k, m;
+  for (k = offsets[i]; k < offsets[i + 1]; ++k) {
+    gr_uint a = 0u;
+    gr_float3 s = gr_make3(0.0f, 0.0f, 0.0f);
+    for (m = old_offsets[i]; m < old_offsets[i + 1]; ++m)
+      if (old_indices[m] == indices[k]) {
+        a = old_sum[m];
+        if (old_slip) s = gr_load3(old_slip, (int)m);
+        break;
+      }
+    sum[k] = a;
+    if (slip) gr_store3(slip, (int)k, s);
+  }
+}
+
+/* A rebuild of the collider planes during the iterations (update_collisions_during_iterations):
+ * grain i's entries in its rebuilt row of planes (offsets, which: each entry's collider) take
+ * what the iterations accumulated for the same collider in its row before (old_offsets,
+ * old_which), not for the same place in the nearest-first row: the summed normal correction
+ * (old_sum into sum) and the carried slip (old_slip into slip, 3 floats an entry), each null
+ * where there is none, and, in place, the impact data's applied corrections (slots: 3 floats a
+ * slot, GR_MAX_PLANES slots a grain, the k-th slot its row's k-th entry; null: none); a collider
+ * the rebuilt row no longer holds takes its own with it. Copies only. */
+GR_INLINE void gr_carry_plane_row(const GR_GLOBAL gr_uint* old_offsets,
+                                  const GR_GLOBAL int* old_which, const GR_GLOBAL float* old_sum,
+                                  const GR_GLOBAL float* old_slip, const GR_GLOBAL gr_uint* offsets,
+                                  const GR_GLOBAL int* which, GR_GLOBAL float* sum,
+                                  GR_GLOBAL float* slip, GR_GLOBAL float* slots, int i) {
+  float dx[3 * GR_MAX_PLANES];
+  GR_GLOBAL float* mine = slots ? slots + 3 * GR_MAX_PLANES * (size_t)i : 0;
+  const gr_uint b = offsets[i], pb = old_offsets[i];
+  gr_uint e, m;
+  int k;
+  if (mine)
+    for (k = 0; k < 3 * GR_MAX_PLANES; ++k) dx[k] = mine[k], mine[k] = 0.0f;
+  for (e = b; e < offsets[i + 1]; ++e) {
+    float a = 0.0f;
+    gr_float3 s = gr_make3(0.0f, 0.0f, 0.0f);
+    for (m = pb; m < old_offsets[i + 1]; ++m)
+      if (old_which[m] == which[e]) {
+        if (old_sum) a = old_sum[m];
+        if (old_slip) s = gr_load3(old_slip, (int)m);
+        if (mine)
+          for (k = 0; k < 3; ++k) mine[3 * (e - b) + k] = dx[3 * (m - pb) + k];
+        break;
+      }
+    if (sum) sum[e] = a;
+    if (slip) gr_store3(slip, (int)e, s);
+  }
+}
+
 #endif /* GRAINS_KERNELS_HISTORY_H */

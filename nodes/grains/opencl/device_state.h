@@ -275,6 +275,16 @@ struct Iterations::Impl {
   // entries go to arrays[kPlaneOffsets], arrays[kPlane] and plane_collider
   cl_kernel plane_count = nullptr, plane_fill = nullptr;
   Buffer plane_colliders, plane_p;
+  // a rebuild during run()'s iterations (JacobiSolve::rebuild, `rebuilding` while it runs): the
+  // planes' start positions, radii and inverse masses where the arrays the passes read hold
+  // others (sent once a substep); the carry kernels (kernels/history.h) and the rows and
+  // colliders of the planes before it (hold_planes: of held_planes_n grains), and the buffers
+  // the carried sums and slips go to, which then change places with those the passes read
+  bool rebuilding = false;
+  Buffer rebuild_P, rebuild_radius, rebuild_inv_mass;
+  cl_kernel carry_pairs = nullptr, carry_planes = nullptr;
+  Buffer held_plane_offsets, held_plane_which, carried_sum, carried_slip;
+  size_t held_planes_n = 0;
   // the colliders' meshes as words (Iterations::set_meshes, engine/mesh_query.h), which the
   // planes, the final collision test and the sleeping test read with plane_colliders; the
   // meshes they are (mesh_key, null for an analytic collider) and whether one is a mesh
@@ -306,7 +316,9 @@ struct Iterations::Impl {
                       &seq_loaded_count, &id, &plane_collider, &flag_copy, &marks, &wave_of,
                       &wave_ends, &block_waves, &hist_slip, &hist_offsets, &hist_indices,
                       &hist_id, &hist_table, &plane_saved, &hist_plane_offsets,
-                      &hist_plane_which, &hist_plane_sum, &shifted, &before})
+                      &hist_plane_which, &hist_plane_sum, &shifted, &before, &rebuild_P,
+                      &rebuild_radius, &rebuild_inv_mass, &held_plane_offsets,
+                      &held_plane_which, &carried_sum, &carried_slip})
       b->release();
     for (std::vector<Buffer>* parts : {&seq, &normal, &factor})
       for (Buffer& b : *parts) b.release();
@@ -335,7 +347,8 @@ struct Iterations::Impl {
                         rows_moved, end_bounds, sleep_begin, sleep_settle, sleep_update,
                         sleep_carry, motion, save_pair_slips, history_table_kernel,
                         load_pair_slips, row_longest, save_plane_slips, load_plane_slips,
-                        shift, chebyshev, shapes, impact_loads, impact_pack})
+                        shift, chebyshev, shapes, impact_loads, impact_pack, carry_pairs,
+                        carry_planes})
       if (k) clReleaseKernel(k);
     if (program) clReleaseProgram(program);
     if (queue) clReleaseCommandQueue(queue);

@@ -517,6 +517,29 @@ __kernel void gr_k_load_plane_slips(__global const gr_uint* offsets, __global co
                       slip);
 }
 
+/* a rebuild during the iterations (kernels/history.h, Iterations::carry_pairs and carry_planes):
+ * what grain i's rows accumulated, carried into its rebuilt rows */
+__kernel void gr_k_carry_pairs(__global const gr_uint* old_offsets,
+                               __global const gr_uint* old_indices, __global const gr_uint* old_sum,
+                               __global const float* old_slip, __global const gr_uint* offsets,
+                               __global const gr_uint* indices, __global gr_uint* sum,
+                               __global float* slip, int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  gr_carry_pair_row(old_offsets, old_indices, old_sum, old_slip, offsets, indices, sum, slip, i);
+}
+
+__kernel void gr_k_carry_planes(__global const gr_uint* old_offsets, __global const int* old_which,
+                                __global const float* old_sum, __global const float* old_slip,
+                                __global const gr_uint* offsets, __global const int* which,
+                                __global float* sum, __global float* slip, __global float* slots,
+                                int n) {
+  const int i = (int)get_global_id(0);
+  if (i >= n) return;
+  gr_carry_plane_row(old_offsets, old_which, old_sum, old_slip, offsets, which, sum, slip, slots,
+                     i);
+}
+
 /* work-item w of `items`: the largest of v[w], v[w + items], ... into part[w] (the host takes
  * the largest of the parts: a maximum does not depend on the order it is taken in) */
 __kernel void gr_k_largest(__global const float* v, int n, __global float* part) {

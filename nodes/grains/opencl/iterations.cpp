@@ -350,19 +350,21 @@ void Iterations::Impl::project_shapes(Buffer* x, size_t components) {
         "clEnqueueNDRangeKernel");
 }
 
-void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSizes& size, float* p,
-                     const gr_normal_sums& acc, int iterations, bool friction_pass,
+void Iterations::run(const gr_grains& g_in, const gr_params& prm, const IterationSizes& size_in,
+                     float* p, const gr_normal_sums& acc_in, int iterations, bool friction_pass,
                      bool accurate_friction, const JacobiSolve& w) {
   Impl& m = *impl_;
-  const size_t n = size.n;
+  const size_t n = size_in.n;
   if (n == 0) return;
+  // (a rebuild during the iterations rewrites them: JacobiSolve::rebuild)
+  gr_grains g = g_in;
+  IterationSizes size = size_in;
+  gr_normal_sums acc = acc_in;
   const size_t f = sizeof(float), u = sizeof(gr_uint);
   HostArray inputs[kArrays];
   const bool p_there = w.p_there && m.p_taken && m.p_taken_n == n;
   m.upload_grains(g, size, p_there ? nullptr : p, inputs);
   if (p_there) m.copy_positions(m.p, *m.p_taken, n);
-  const bool pairs = acc.pair && g.nbr_offsets;
-  if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f, m.largest);
   if (size.sums_there)
     m.pair_sum.reserve(m.ctx, size.pair_entries * u, m.largest);
   else
@@ -374,23 +376,29 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
   else
     m.upload(m.friction_dx, acc.friction_dx, 3 * n * f);
 
-  for (cl_kernel k : {m.iterate, m.friction}) m.set_grains(k, prm, g, inputs);
   const int count = static_cast<int>(n);
-  const gr_uint row_length = static_cast<gr_uint>(size.row_length);
-  // iterate: p, next, scratch, row_length, pair_sum, collider_sum, collider_dx, friction_dx, n
-  set_buffer(m.iterate, kFirstOwn + 2, pairs ? &m.scratch : nullptr);
-  check(clSetKernelArg(m.iterate, kFirstOwn + 3, sizeof(gr_uint), &row_length), "clSetKernelArg");
-  set_buffer(m.iterate, kFirstOwn + 4, acc.pair ? &m.pair_sum : nullptr);
-  set_buffer(m.iterate, kFirstOwn + 5, acc.collider ? &m.collider_sum : nullptr);
-  set_buffer(m.iterate, kFirstOwn + 6, acc.collider_dx ? &m.collider_dx : nullptr);
-  set_buffer(m.iterate, kFirstOwn + 7, acc.friction_dx ? &m.friction_dx : nullptr);
-  check(clSetKernelArg(m.iterate, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
-  // friction: p, next, pair_sum, collider_sum, collider_dx, friction_dx, n
-  set_buffer(m.friction, kFirstOwn + 2, acc.pair ? &m.pair_sum : nullptr);
-  set_buffer(m.friction, kFirstOwn + 3, acc.collider ? &m.collider_sum : nullptr);
-  set_buffer(m.friction, kFirstOwn + 4, acc.collider_dx ? &m.collider_dx : nullptr);
-  set_buffer(m.friction, kFirstOwn + 5, acc.friction_dx ? &m.friction_dx : nullptr);
-  check(clSetKernelArg(m.friction, kFirstOwn + 6, sizeof(int), &count), "clSetKernelArg");
+  // the passes' arguments but their positions (set again after a rebuild)
+  auto bind = [&] {
+    const bool pairs = acc.pair && g.nbr_offsets;
+    if (pairs) m.scratch.reserve(m.ctx, n * size.row_length * f, m.largest);
+    for (cl_kernel k : {m.iterate, m.friction}) m.set_grains(k, prm, g, inputs);
+    const gr_uint row_length = static_cast<gr_uint>(size.row_length);
+    // iterate: p, next, scratch, row_length, pair_sum, collider_sum, collider_dx, friction_dx, n
+    set_buffer(m.iterate, kFirstOwn + 2, pairs ? &m.scratch : nullptr);
+    check(clSetKernelArg(m.iterate, kFirstOwn + 3, sizeof(gr_uint), &row_length), "clSetKernelArg");
+    set_buffer(m.iterate, kFirstOwn + 4, acc.pair ? &m.pair_sum : nullptr);
+    set_buffer(m.iterate, kFirstOwn + 5, acc.collider ? &m.collider_sum : nullptr);
+    set_buffer(m.iterate, kFirstOwn + 6, acc.collider_dx ? &m.collider_dx : nullptr);
+    set_buffer(m.iterate, kFirstOwn + 7, acc.friction_dx ? &m.friction_dx : nullptr);
+    check(clSetKernelArg(m.iterate, kFirstOwn + 8, sizeof(int), &count), "clSetKernelArg");
+    // friction: p, next, pair_sum, collider_sum, collider_dx, friction_dx, n
+    set_buffer(m.friction, kFirstOwn + 2, acc.pair ? &m.pair_sum : nullptr);
+    set_buffer(m.friction, kFirstOwn + 3, acc.collider ? &m.collider_sum : nullptr);
+    set_buffer(m.friction, kFirstOwn + 4, acc.collider_dx ? &m.collider_dx : nullptr);
+    set_buffer(m.friction, kFirstOwn + 5, acc.friction_dx ? &m.friction_dx : nullptr);
+    check(clSetKernelArg(m.friction, kFirstOwn + 6, sizeof(int), &count), "clSetKernelArg");
+  };
+  bind();
 
   // p and next swap after every pass, as the CPU loop swaps its iterates
   Buffer* from = &m.p;
@@ -424,6 +432,17 @@ void Iterations::run(const gr_grains& g, const gr_params& prm, const IterationSi
     check(clSetKernelArg(k, 3, sizeof(int), &items), "clSetKernelArg");
   }
   for (int it = 0; it < iterations; ++it) {
+    if (it > 0 && w.rebuild) {
+      // the searches take the iterate where it is; the prediction is not there after them
+      m.p_taken = from, m.p_taken_n = n;
+      m.rebuilding = true;
+      w.rebuild(&g, &size, &acc);
+      m.rebuilding = false;
+      m.p_taken = nullptr, m.p_taken_n = 0;
+      m.upload_grains(g, size, nullptr, inputs, true);  // the rows where the passes read them
+      bind();
+      if (sh) m.set_shapes(*sh, prm, g, inputs, acc.collider ? &m.collider_sum : nullptr, n);
+    }
     if (chebyshev) {
       omega = gr_chebyshev_omega(it, w.chebyshev_rho, omega);
       Buffer* was = from;

@@ -196,6 +196,14 @@ struct JacobiSolve {
   // rigid shape matching after each iteration and after each friction pass, before the pins
   // (ShapeArrays, its normal sums acc.collider; null: none)
   const ShapeArrays* shapes = nullptr;
+  // set: the rows or planes found again before each iteration but the first
+  // (update_*_during_iterations), there. It is called with the iterate as the positions the
+  // searches take where they are (their p_there), makes its calls (find_neighbours() with
+  // the rows staying and carry_pairs(); hold_planes(), find_planes() with rows and entries
+  // staying, and carry_planes()) and rewrites g, size and acc for the rows and planes it
+  // found: their host arrays sized as the host sizes them, their contents there. run() then
+  // takes them there; nothing but what those calls bring back crosses.
+  std::function<void(gr_grains* g, IterationSizes* size, gr_normal_sums* acc)> rebuild;
 };
 
 // What crosses between the host and the device: bytes each way, and the transfers that carried
@@ -244,6 +252,11 @@ class Iterations {
                        NeighborList& out, bool indices_there = false, bool p_there = false);
   // the rows the last find_neighbours() left there into out (out.offsets sized as it gave them)
   void fetch_rows(NeighborList& out);
+  // A rebuild within run() (JacobiSolve::rebuild), after a find_neighbours() whose rows
+  // (`entries` entries) stay there: what the passes summed for each pair (acc.pair) and, with
+  // `slips`, g.pair_slip follow each neighbour from the rows the passes read into the new rows
+  // (gr_carry_pair_row), there.
+  void carry_pairs(size_t n, size_t entries, bool slips);
 
   // The Jacobi path's contact history between grains kept on the device (kernels/history.h,
   // opencl/history.cpp), where the rows its search found are (size.rows_there). save: each row
@@ -406,6 +419,13 @@ class Iterations {
   // the rows and colliders of the last find_planes() kept there (a device copy) for its later
   // calls to compare theirs with: those a contact list was built from
   void keep_planes();
+  // A rebuild within run() (JacobiSolve::rebuild): hold_planes() before find_planes() keeps the
+  // rows and colliders of the planes the passes read; carry_planes() after it moves what the
+  // passes summed for each plane, by collider (gr_carry_plane_row): the collider sums
+  // (acc.collider) with `sums`, g.plane_slip with `slips` and the impact data's slots
+  // (acc.collider_dx) with `slots`, there.
+  void hold_planes();
+  void carry_planes(size_t n, bool sums, bool slips, bool slots);
 
   // A new substep: the calls until the next one may take a grain array (gr_grains' per-grain
   // arrays but the rows and planes, and the pins') sent by an earlier one from the same host

@@ -135,7 +135,7 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
     m.upload(m.nb_P, P, 3 * n * f);
   else if (m.p_taken != &m.nb_P)
     m.copy_positions(m.nb_P, *m.p_taken, n);
-  m.upload(m.nb_radius, radius, n * f);
+  m.upload_once(m.nb_radius, radius, n * f);  // (a rebuild's search takes them again)
   m.p_taken = &m.nb_P;
   m.p_taken_n = n;
   m.searched_n = n;
@@ -218,6 +218,29 @@ bool Iterations::find_neighbours(const float* P, const float* radius, size_t n,
   if (!indices_there) m.download(m.nb_indices, out.indices.data(), entries * u);
   m.rows_found = true;
   return true;
+}
+
+void Iterations::carry_pairs(size_t n, size_t entries, bool slips) {
+  Impl& m = *impl_;
+  if (!m.rows_found || m.rows_grains != n)
+    throw std::logic_error("carry_pairs: the device holds no such rows");
+  const size_t u = sizeof(gr_uint);
+  cl_kernel k = m.kernel(m.carry_pairs, "gr_k_carry_pairs");
+  m.carried_sum.reserve(m.ctx, entries * u, m.largest);
+  if (slips) m.carried_slip.reserve(m.ctx, 3 * entries * sizeof(float), m.largest);
+  // the rows the passes read, their sums and slips; the search's rows; what they take; n
+  arg(k, 0, m.arrays[kNbrOffsets]), arg(k, 1, m.arrays[kNbrIndices]), arg(k, 2, m.pair_sum);
+  set_buffer(k, 3, slips ? &m.arrays[kPairSlip] : nullptr);
+  arg(k, 4, m.nb_offsets), arg(k, 5, m.nb_indices), arg(k, 6, m.carried_sum);
+  set_buffer(k, 7, slips ? &m.carried_slip : nullptr);
+  arg(k, 8, static_cast<int>(n));
+  m.launch(k, n);
+  m.forget(m.pair_sum);
+  std::swap(m.pair_sum, m.carried_sum);
+  if (slips) {
+    m.forget(m.arrays[kPairSlip]);
+    std::swap(m.arrays[kPairSlip], m.carried_slip);
+  }
 }
 
 void Iterations::fetch_rows(NeighborList& out) {

@@ -35,11 +35,17 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   // sent once a substep), the predicted positions where the search or the prediction left them,
   // and the radii the search's copies when it took these (its own must stay as it took them:
   // row_reach)
-  Buffer& Pb = m.arrays[kP];
+  // (within run()'s rebuild, the arrays the passes read stay as they are: where one holds
+  // other values, such as the pre-stabilized start, the planes take their own)
+  auto own = [&](Array k, Buffer& instead, const void* host, size_t bytes) -> Buffer& {
+    return m.rebuilding && !m.holds(m.arrays[k], host, bytes) ? instead : m.arrays[k];
+  };
+  Buffer& Pb = own(kP, m.rebuild_P, P, 3 * n * f);
   m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
   p_there = p_there && m.p_taken && m.p_taken_n == n;
   Buffer& pb = p_there ? *m.p_taken : m.plane_p;
-  Buffer& rb = radius_there ? m.nb_radius : m.arrays[kRadius];
+  radius_there = radius_there && !m.rebuilding;
+  Buffer& rb = radius_there ? m.nb_radius : own(kRadius, m.rebuild_radius, radius, n * f);
   if (!p_there) m.upload(pb, p, 3 * n * f);
   if (!radius_there) {
     m.upload_once(rb, radius, n * f);
@@ -52,7 +58,7 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   }
   m.p_taken = &pb;
   m.p_taken_n = n;
-  Buffer& wb = m.arrays[kInvMass];
+  Buffer& wb = own(kInvMass, m.rebuild_inv_mass, inv_mass, n * f);
   m.upload_once(wb, inv_mass, n * f);
   Buffer& rows = m.arrays[kPlaneOffsets];
   rows.reserve(m.ctx, (n + 1) * u, m.largest);
@@ -166,6 +172,51 @@ void Iterations::fetch_planes(std::vector<float>* plane, std::vector<uint32_t>* 
     which->resize(entries);
     m.download(m.plane_collider, which->data(), entries * sizeof(int));
   }
+}
+
+void Iterations::hold_planes() {
+  Impl& m = *impl_;
+  const size_t n = m.plane_grains, entries = m.plane_entries, u = sizeof(gr_uint);
+  m.held_plane_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
+  check(clEnqueueCopyBuffer(m.queue, m.arrays[kPlaneOffsets].mem, m.held_plane_offsets.mem, 0, 0,
+                            (n + 1) * u, 0, nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  m.held_plane_which.reserve(m.ctx, entries * sizeof(int), m.largest);
+  if (entries > 0)
+    check(clEnqueueCopyBuffer(m.queue, m.plane_collider.mem, m.held_plane_which.mem, 0, 0,
+                              entries * sizeof(int), 0, nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+  m.held_planes_n = n;
+}
+
+void Iterations::carry_planes(size_t n, bool sums, bool slips, bool slots) {
+  Impl& m = *impl_;
+  if (m.held_planes_n != n || m.plane_grains != n)
+    throw std::logic_error("carry_planes: the device holds no such planes");
+  const size_t f = sizeof(float), entries = m.plane_entries;
+  cl_kernel k = m.kernel(m.carry_planes, "gr_k_carry_planes");
+  if (sums) m.carried_sum.reserve(m.ctx, entries * f, m.largest);
+  if (slips) m.carried_slip.reserve(m.ctx, 3 * entries * f, m.largest);
+  m.plane_collider.reserve(m.ctx, entries * sizeof(int), m.largest);  // bound even when empty
+  // old rows, colliders, sums and slips; the new ones; the slots; n
+  arg(k, 0, m.held_plane_offsets), arg(k, 1, m.held_plane_which);
+  set_buffer(k, 2, sums ? &m.collider_sum : nullptr);
+  set_buffer(k, 3, slips ? &m.arrays[kPlaneSlip] : nullptr);
+  arg(k, 4, m.arrays[kPlaneOffsets]), arg(k, 5, m.plane_collider);
+  set_buffer(k, 6, sums ? &m.carried_sum : nullptr);
+  set_buffer(k, 7, slips ? &m.carried_slip : nullptr);
+  set_buffer(k, 8, slots ? &m.collider_dx : nullptr);
+  arg(k, 9, static_cast<int>(n));
+  m.launch(k, n);
+  if (sums) {
+    m.forget(m.collider_sum);
+    std::swap(m.collider_sum, m.carried_sum);
+  }
+  if (slips) {
+    m.forget(m.arrays[kPlaneSlip]);
+    std::swap(m.arrays[kPlaneSlip], m.carried_slip);
+  }
+  m.held_planes_n = 0;
 }
 
 void Iterations::keep_planes() {

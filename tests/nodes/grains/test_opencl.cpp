@@ -117,13 +117,13 @@ TEST_CASE("use_opencl: a substep agrees with the CPU path's within float roundin
   // of a coordinate per pass: 4 x 2^-24 x the coordinates' reach (about 1 m). An averaged
   // Jacobi pass of contacts moves two nearby states apart by at most (1 + overlap / distance)
   // per pass, so after S passes (the I iterations and the CPU's pre-stabilization passes) the
-  // two differ by at most S x 4 ulp x (1 + overlap / distance)^S, with the overlap grains can reach in the substep
-  // measured from the settled state (about 1.3e-5 m, 3e-4 of a radius). The same with the
-  // neighbour rows rebuilt before every iteration (a device call each). Over many substeps no
-  // such bound holds: a difference turns into velocity and grains that meet scatter it like
-  // billiard balls (a frictionless pour parts by 7 mm within a frame once grains land on
-  // grains), and with friction a contact's switch between sticking and sliding is a step; the
-  // physical measures are compared instead (the other "use_opencl:" tests).
+  // two differ by at most S x 4 ulp x (1 + overlap / distance)^S, with the overlap grains can reach
+  // in the substep measured from the settled state (about 1.3e-5 m, 3e-4 of a radius). The same
+  // with the neighbour rows rebuilt before every iteration (there, within the one device call).
+  // Over many substeps no such bound holds: a difference turns into velocity and grains that meet
+  // scatter it like billiard balls (a frictionless pour parts by 7 mm within a frame once grains
+  // land on grains), and with friction a contact's switch between sticking and sliding is a step;
+  // the physical measures are compared instead (the other "use_opencl:" tests).
   const float r = 0.05f;
   GrainsSettings settings = test::settings(24, 2, 20);
   settings.contact_solver = kContactJacobi;

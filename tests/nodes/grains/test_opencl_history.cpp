@@ -22,7 +22,8 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
   // Both write the same floats (kernels/history.h: no multiply and add fused on either side): the
   // two runs end every substep with the same positions and velocities, bit for bit.
   // With update_neighbors_during_iterations the rows are found again during the iterations,
-  // and the device's carried slips and pair sums come back for the host to carry over.
+  // there (rebuilds_there: the device carries its pair sums and slips over to the new rows,
+  // gr_carry_pair_row), against the host's carrying its own.
   for (bool rebuild : {false, true}) {
     INFO("update_neighbors_during_iterations " << rebuild);
     test::Scene host = test::layered_block(true);
@@ -69,17 +70,16 @@ TEST_CASE("use_opencl: the Jacobi path's contact history made on the device is t
     INFO(saved << " histories saved on the device, " << looked_up << " looked up there");
     CHECK(host.solver.histories_saved_on_device() == 0);
     CHECK(host.solver.histories_looked_up_on_device() == 0);
-    // the ground's slips (gr_save_plane_slips) saved there where the iterations' end stays there
-    // (every substep's, one call of the iterations), else on the host (the rows rebuilt during
-    // the iterations: a call a pass)
+    // the ground's slips (gr_save_plane_slips) saved there where the iterations' end stays there:
+    // every substep's, one call of the iterations, the rows rebuilt during them there too
     const size_t planes = there.solver.plane_histories_saved_on_device();
     CHECK(host.solver.plane_histories_saved_on_device() == 0);
-    CHECK(planes == (rebuild ? 0 : 120));
+    CHECK(planes == 120);
     // and kept there with the planes, which stay there (jacobi_planes_stay), the next substep's
     // carried slips made there from them: every substep's but the first (no history) and the
     // one after the state was read back (the state's history, looked up here)
     CHECK(host.solver.plane_histories_loaded_on_device() == 0);
-    CHECK(there.solver.plane_histories_loaded_on_device() == (rebuild ? 0 : 118));
+    CHECK(there.solver.plane_histories_loaded_on_device() == 118);
     if (rebuild) {  // every substep's rows found again: every history saved, then looked up
       CHECK(saved >= 110);
       CHECK(looked_up >= 100);

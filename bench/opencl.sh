@@ -6,18 +6,21 @@
 # frames 2 on: frame 1 includes building the kernels), the last frame's mean and max overlap
 # (the error measure), and the largest position difference between the two runs' last frames.
 #
-# usage (from the repository root, ../shared beside it): bench/opencl.sh GRAPH FRAMES [GRAINS_BINARY] [OUT_DIR]
+# usage (from the repository root, ../shared beside it):
+#   bench/opencl.sh GRAPH FRAMES [GRAINS_BINARY] [OUT_DIR] [RUN_ARGUMENTS...]
+# RUN_ARGUMENTS go to both runs (--set NODE.PARAM=VALUE ...).
 set -euo pipefail
 graph=$1
 frames=$2
 grains=${3:-build/grains}
 out=${4:-out/bench-opencl}
+extra=("${@:5}")
 mkdir -p "$out"
 for backend in cpu opencl; do
   flag=""
   [ "$backend" = opencl ] && flag="--opencl"
   "$grains" run "$graph" --quiet --frames "$frames" --set solver.error_control=false $flag \
-    --out "$out/$backend" --overwrite
+    --out "$out/$backend" --overwrite "${extra[@]}"
   awk -F, -v b="$backend" 'NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
     NR > 2 { wall += $col["wall_ms"]; n++ }
     { pen = $col["mean_penetration"]; maxpen = $col["max_penetration"]; pts = $col["points"] }

@@ -714,10 +714,12 @@ void GrainsSolver::bind_inputs(SubstepContext& c) {
   // rigid shape matching: its components and rest shapes (build_shapes)
   c.shapes_on = s.enable_rigid_shape_matching && d.prim_points && d.prim_count > 0;
   if (c.shapes_on) build_shapes(d);
+  // (with jacobi where its iterations are one device call, rebuilds and all: jacobi_whole)
   c.shapes_here =
-      c.shapes_on && !(s.use_opencl && !s.host_shapes &&
-                       (s.contact_solver == kContactGaussSeidel || jacobi_loop_there(s)) &&
-                       open_device().shapes_there());
+      c.shapes_on &&
+      !(s.use_opencl && !s.host_shapes &&
+        (s.contact_solver == kContactGaussSeidel || jacobi_loop_there(s, rebuilds_fit(c))) &&
+        open_device().shapes_there());
 
   // explicit constraints (c.constraints_on above)
   if (c.constraints_on) {
@@ -816,13 +818,19 @@ static bool chebyshev_steps(const GrainsSettings& s) {
   return s.chebyshev_rho > 0 && s.constraint_iterations > GR_CHEBYSHEV_DELAY;
 }
 
+// whether the settings find rows or planes again during the Jacobi iterations
+static bool finds_again(const GrainsSettings& s) {
+  return s.update_neighbors_during_iterations || s.update_collisions_during_iterations;
+}
+
 // the settings under which a Jacobi substep's stages chain on the device (jacobi_on_device: no
-// rebuild during the iterations, no history made here, none of the test switches that keep a
-// stage here); the substep's grains decide the rest
-static bool jacobi_chain(const GrainsSettings& s) {
+// history made here, none of the test switches that keep a stage here, no rebuild during the
+// iterations but where `rebuilds` says they are made there too); the substep's grains decide
+// the rest
+static bool jacobi_chain(const GrainsSettings& s, bool rebuilds = false) {
   return s.contact_solver != kContactGaussSeidel && !(chebyshev_steps(s) && s.host_chebyshev) &&
-         !s.update_neighbors_during_iterations && !s.update_collisions_during_iterations &&
-         !s.host_history && !s.send_history_p && !s.host_predict && !s.host_finish;
+         (rebuilds || !finds_again(s)) && !s.host_history && !s.send_history_p && !s.host_predict &&
+         !s.host_finish;
 }
 
 // gauss_seidel's, and jacobi's where its substep chains on the device (jacobi_chain: its end
@@ -1092,6 +1100,9 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   // a rebuild during the device's iterations (rebuilds_there): the rows stay there, and what
   // the iterations summed follows them there
   const bool resident = !first && c.rebuilds_there;
+  // ... and the first search of a substep chained there whose rows are found again there
+  // (jacobi_on_device): its rows stay there whatever reads them later
+  const bool chained = first && c.jacobi_there && c.s.update_neighbors_during_iterations;
   if (!first && c.pair_friction_pass && !resident) {
     sync_rows();  // the sums and slips are carried over to the rebuilt rows here
     std::swap(prev_neighbors_, neighbors_);
@@ -1102,8 +1113,9 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
   // carry the sums over and use the search's own store.
   // use_opencl: the rows stay on the device when the substep reads them only there (their
   // number of entries comes back)
-  const bool stay = resident || (first && rows_stay(c) && open_device().builds_contacts() &&
-                                 !(rows_read_sent_ > rows_bytes_));
+  const bool stay = resident || chained ||
+                    (first && rows_stay(c) && open_device().builds_contacts() &&
+                     !(rows_read_sent_ > rows_bytes_));
   if (first && keep_rows(c)) {
     c.same_rows = true;
   } else {
@@ -1118,7 +1130,7 @@ void GrainsSolver::find_pairs(SubstepContext& c, bool first) {
     const bool on_device =
         c.s.use_opencl && open_device().find_neighbours(p_for_device(c, p_there), c.search_radius,
                                                         n, c.q, neighbors_, stay, p_there);
-    if (!on_device && resident)
+    if (!on_device && (resident || chained))
       throw std::runtime_error(
           "use_opencl: the device could not find the neighbour rows again during the iterations "
           "(update_neighbors_during_iterations; too many for its largest buffer?); run it with "
@@ -1317,7 +1329,9 @@ void GrainsSolver::device_passes(SubstepContext& c, float* x, int count, bool fr
 }
 
 bool GrainsSolver::jacobi_whole(const SubstepContext& c) const {
-  return (jacobi_loop_there(c.s) || c.rebuilds_there) && !c.shapes_here;
+  const bool again = (c.s.update_neighbors_during_iterations && c.pairs_on) ||
+                     (c.s.update_collisions_during_iterations && c.colliders_on);
+  return jacobi_loop_there(c.s, true) && !c.shapes_here && (!again || c.rebuilds_there);
 }
 
 // use_opencl with jacobi: the rows and planes found again during the iterations
@@ -1338,11 +1352,27 @@ bool GrainsSolver::rebuilds_there(const SubstepContext& c) {
   return !(planes && meshes_here(s, c.colliders, c.collider_count));
 }
 
-// jacobi_whole but for the shapes, which the device then projects too where it can
-bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s) {
+// jacobi_whole but for the shapes, which the device then projects too where it can, and for
+// the rebuilds during the iterations where `rebuilds` (else none)
+bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s, bool rebuilds) {
   return s.use_opencl && s.contact_solver != kContactGaussSeidel &&
-         !(chebyshev_steps(s) && s.host_chebyshev) && !s.update_neighbors_during_iterations &&
-         !s.update_collisions_during_iterations;
+         !(chebyshev_steps(s) && s.host_chebyshev) && (rebuilds || !finds_again(s));
+}
+
+// Whether the rows and planes found again during the iterations (update_*_during_iterations)
+// will be found there (rebuilds_there), as the substep knows it before its search: its rows may
+// stay there (rows_stay) on a device that finds them (double precision) and builds them
+// (builds_contacts), its planes are found there (no mesh queried here), and no test switch
+// keeps them here. (Where the device then declines the first search, its buffers too small,
+// find_pairs refuses the substep.)
+bool GrainsSolver::rebuilds_fit(const SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  if (s.host_rebuilds || s.fetch_plane_rows) return false;
+  if (s.update_neighbors_during_iterations && c.pairs_on &&
+      !(rows_stay(c) && open_device().builds_contacts() && open_device().shapes_there()))
+    return false;
+  return !(s.update_collisions_during_iterations && c.colliders_on &&
+           meshes_here(s, c.colliders, c.collider_count));
 }
 
 bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
@@ -1353,12 +1383,13 @@ bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {
 // on the device, the positions staying there between them (its end comes back, or stays, as
 // gauss_seidel's does; carry_start takes the next start from it), where nothing between them
 // runs here: no rigid shapes projected here, no rows or planes found again during the iterations
-// (jacobi_whole; Chebyshev's step is made there too), no impact data against a mesh collider
-// whose queries the host makes (meshes_here: its final collision test, and so the momenta, are
-// the host's), no contact history made here (host_history), and none of the test switches
-// send_history_p, host_predict and host_finish.
+// but there (jacobi_whole; Chebyshev's step is made there too), no impact data against a mesh
+// collider whose queries the host makes (meshes_here: its final collision test, and so the momenta,
+// are the host's), no contact history made here (host_history), and none of the test switches
+// send_history_p, host_predict and host_finish. Rows and planes found again during the
+// iterations are found there too where they can be (rebuilds_fit).
 bool GrainsSolver::jacobi_on_device(const SubstepContext& c) {
-  return c.s.use_opencl && jacobi_chain(c.s) && !c.shapes_here &&
+  return c.s.use_opencl && !c.shapes_here && jacobi_chain(c.s, rebuilds_fit(c)) &&
          !(c.d.impact_impulse && meshes_here(c.s, c.colliders, c.collider_count));
 }
 
@@ -1482,6 +1513,8 @@ void GrainsSolver::iterate(SubstepContext& c) {
   if (chebyshev) w.chebyshev_rho = s.chebyshev_rho;
   opencl::ShapeArrays shapes;
   if (device_whole && c.shapes_on) w.shapes = shape_arrays_there(c, &shapes);
+  if (c.jacobi_there && !device_whole)
+    throw std::logic_error("grains: the Jacobi substep chained on the device without its passes");
   // the rows and planes found again there before each iteration but the first, run()'s
   // arrays and sums rewritten for them
   if (device_whole && c.rebuilds_there)

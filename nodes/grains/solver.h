@@ -612,8 +612,9 @@ class GrainsSolver {
   // rigid shapes projected here, no rows or planes found again during them but there:
   // rebuilds_there; Chebyshev's step made there)
   bool jacobi_whole(const SubstepContext& c) const;
-  static bool jacobi_loop_there(const GrainsSettings& s);
+  static bool jacobi_loop_there(const GrainsSettings& s, bool rebuilds = false);
   bool rebuilds_there(const SubstepContext& c);
+  bool rebuilds_fit(const SubstepContext& c);
   // the shapes as a device projects them (shape_arrays), into *out
   const opencl::ShapeArrays* shape_arrays_there(const SubstepContext& c, opencl::ShapeArrays* out);
   // ... and this substep's collider planes may stay there: no stage here reads them (no impact

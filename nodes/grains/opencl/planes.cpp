@@ -36,12 +36,14 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   // and the radii the search's copies when it took these (its own must stay as it took them:
   // row_reach)
   // (within run()'s rebuild, the arrays the passes read stay as they are: where one holds
-  // other values, such as the pre-stabilized start, the planes take their own)
+  // other values, such as the pre-stabilized start, the planes take their own; the start as it
+  // went up where pre-stabilization there kept it)
   auto own = [&](Array k, Buffer& instead, const void* host, size_t bytes) -> Buffer& {
     return m.rebuilding && !m.holds(m.arrays[k], host, bytes) ? instead : m.arrays[k];
   };
-  Buffer& Pb = own(kP, m.rebuild_P, P, 3 * n * f);
-  m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
+  const bool kept = m.rebuilding && m.start_kept == n && !m.holds(m.arrays[kP], P, 3 * n * f);
+  Buffer& Pb = kept ? m.start : own(kP, m.rebuild_P, P, 3 * n * f);
+  if (!kept) m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
   p_there = p_there && m.p_taken && m.p_taken_n == n;
   Buffer& pb = p_there ? *m.p_taken : m.plane_p;
   radius_there = radius_there && !m.rebuilding;

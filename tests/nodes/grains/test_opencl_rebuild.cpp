@@ -39,7 +39,8 @@ TEST_CASE("use_opencl: the rows and planes found again during the iterations, th
   // calls of an iteration each, the positions going up and coming back at each and the host
   // carrying each pair's and each plane's sums, slips and impact slots over to the new rows
   // (host_rebuilds); and there, within the substep's one call (gr_k_carry_pairs,
-  // gr_k_carry_planes, the same functions the host's carry calls: copies only). The searches
+  // gr_k_carry_planes, the same functions the host's carry calls: copies only), the substep
+  // chained there from its prediction to its end (jacobi_on_device). The searches
   // are the host's, bit for bit (test_opencl_neighbours.cpp, test_opencl_planes.cpp), so the
   // two runs end every substep with the same positions, velocities and impact data, bit for
   // bit: with the friction pass once after the iterations and after each of them
@@ -66,12 +67,25 @@ TEST_CASE("use_opencl: the rows and planes found again during the iterations, th
       REQUIRE(host.impact_impulse == there.impact_impulse);
       REQUIRE(host.impact_normal == there.impact_normal);
       REQUIRE(host.impact_point == there.impact_point);
+      // and the last rebuild's planes (their ranges reach from the substep's start as it went
+      // up, not from the pre-stabilized one)
+      const GrainsSolver::PlaneRows a = host.solver.collider_planes(),
+                                    b = there.solver.collider_planes();
+      REQUIRE(*a.offsets == *b.offsets);
+      REQUIRE(*a.collider == *b.collider);
+      REQUIRE(*a.plane == *b.plane);
+      // the substep chained there from its prediction to its end (jacobi_on_device), the
+      // host's rebuilds keeping it here
+      CHECK(there.solver.finished_on_device());
+      CHECK(!host.solver.finished_on_device());
       // each of the host's 9 rebuilds sends the positions (12 B a grain) and brings them back,
-      // at least; the one call sends them once (the next test: nothing a rebuild)
+      // at least; the chain sends no position after the first substep (the next test: nothing
+      // a rebuild)
       const double there_sent = double(there.solver.device_traffic().sent - there0.sent);
       const double host_sent = double(host.solver.device_traffic().sent - host0.sent);
       INFO("sent " << there_sent / n << " B a grain, between calls " << host_sent / n);
       CHECK(host_sent >= there_sent + 9 * 12 * n);
+      if (k > 0) CHECK(there_sent < 12 * n);
       for (size_t e = 0; e < there.impact_collider.size(); ++e) {
         planes += there.impact_collider[e] > 0;
         corner += there.impact_collider[e] > 0 && e % GrainsSolver::kContactSlots > 0;
@@ -92,6 +106,7 @@ TEST_CASE("use_opencl: a rebuild during the iterations there reads back only its
   // number of row entries; the longest row, gr_k_row_longest's 1,024 parts) and the planes'
   // number of entries, whatever the number of grains: no position crosses between iterations.
   test::Scene sc = cornered();
+  sc.impacts = false;  // (their packed slots come back by the number filled)
   for (int k = 0; k < 30; ++k) sc.substep();
   opencl::Traffic step[2];
   for (const int iterations : {10, 20}) {
@@ -107,4 +122,39 @@ TEST_CASE("use_opencl: a rebuild during the iterations there reads back only its
                << " and " << step[1].received << " B");
   CHECK(step[1].sent == step[0].sent);
   CHECK(step[1].received - step[0].received == 10 * (7 * 1024 * 4 + 4 + 1024 * 4 + 4));
+}
+
+TEST_CASE("use_opencl: the planes found again there reach from the substep's start",
+          "[opencl][jacobi]") {
+  // A plane's range reaches from a grain's start to where it is (gr_plane_range), which the
+  // rebuilds take from the substep's start as it went up, as the host's do, not from the start
+  // that pre-stabilization moved there. The 512 grains with a wall 2 cm into the block's first
+  // column (pre-stabilization moves those grains 2 cm out of it) and a second wall 7 cm from
+  // the first row's centres, beyond 1.5 radii (6 cm) but within that and the 2 cm moved: the
+  // corner grains' rebuilt rows hold the second wall where the start is the one that went up.
+  // Three substeps, chained there and with the host's rebuilds: the same planes, bit for bit.
+  test::Scene host = test::layered_block(true);
+  host.s.contact_solver = kContactJacobi;
+  host.s.pre_stabilization = true;
+  host.s.update_collisions_during_iterations = true;
+  host.add_collider(test::box({-0.02f - 0.0275f, 0.5f, 0.3f}, {0.055f, 1.0f, 1.0f}));
+  host.add_collider(test::box({0.3f, 0.5f, -0.07f - 0.0275f}, {1.0f, 1.0f, 0.055f}));
+  test::Scene there = host;
+  host.s.host_rebuilds = true;
+  size_t far = 0;
+  for (int k = 0; k < 3; ++k) {
+    INFO("substep " << k);
+    host.substep();
+    there.substep();
+    REQUIRE(host.P == there.P);
+    CHECK(there.solver.finished_on_device());
+    const GrainsSolver::PlaneRows a = host.solver.collider_planes(),
+                                  b = there.solver.collider_planes();
+    REQUIRE(*a.offsets == *b.offsets);
+    REQUIRE(*a.collider == *b.collider);
+    REQUIRE(*a.plane == *b.plane);
+    for (int32_t c : *a.collider) far += c == 2;
+  }
+  INFO(far << " entries of the far wall");
+  CHECK(far > 0);  // the premise
 }

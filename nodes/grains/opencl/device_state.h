@@ -301,6 +301,9 @@ struct Iterations::Impl {
   cl_kernel plane_same = nullptr;
   Buffer kept_plane_offsets, kept_plane_which, plane_differs;
   size_t kept_planes_n = 0, kept_plane_entries = 0;
+  // the rows and colliders of the last find_planes() copied there into offsets and which
+  // (keep_planes, hold_planes)
+  void copy_plane_rows(Buffer& offsets, Buffer& which);
 
   ~Impl() {
     // what was enqueued and not waited for runs to its end first: PoCL compiles a kernel on its

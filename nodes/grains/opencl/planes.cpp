@@ -176,19 +176,23 @@ void Iterations::fetch_planes(std::vector<float>* plane, std::vector<uint32_t>* 
   }
 }
 
+void Iterations::Impl::copy_plane_rows(Buffer& offsets, Buffer& which) {
+  const size_t n = plane_grains, entries = plane_entries, u = sizeof(gr_uint);
+  offsets.reserve(ctx, (n + 1) * u, largest);
+  check(clEnqueueCopyBuffer(queue, arrays[kPlaneOffsets].mem, offsets.mem, 0, 0, (n + 1) * u, 0,
+                            nullptr, nullptr),
+        "clEnqueueCopyBuffer");
+  which.reserve(ctx, entries * sizeof(int), largest);
+  if (entries > 0)
+    check(clEnqueueCopyBuffer(queue, plane_collider.mem, which.mem, 0, 0, entries * sizeof(int), 0,
+                              nullptr, nullptr),
+          "clEnqueueCopyBuffer");
+}
+
 void Iterations::hold_planes() {
   Impl& m = *impl_;
-  const size_t n = m.plane_grains, entries = m.plane_entries, u = sizeof(gr_uint);
-  m.held_plane_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
-  check(clEnqueueCopyBuffer(m.queue, m.arrays[kPlaneOffsets].mem, m.held_plane_offsets.mem, 0, 0,
-                            (n + 1) * u, 0, nullptr, nullptr),
-        "clEnqueueCopyBuffer");
-  m.held_plane_which.reserve(m.ctx, entries * sizeof(int), m.largest);
-  if (entries > 0)
-    check(clEnqueueCopyBuffer(m.queue, m.plane_collider.mem, m.held_plane_which.mem, 0, 0,
-                              entries * sizeof(int), 0, nullptr, nullptr),
-          "clEnqueueCopyBuffer");
-  m.held_planes_n = n;
+  m.copy_plane_rows(m.held_plane_offsets, m.held_plane_which);
+  m.held_planes_n = m.plane_grains;
 }
 
 void Iterations::carry_planes(size_t n, bool sums, bool slips, bool slots) {
@@ -223,19 +227,9 @@ void Iterations::carry_planes(size_t n, bool sums, bool slips, bool slots) {
 
 void Iterations::keep_planes() {
   Impl& m = *impl_;
-  const size_t n = m.plane_grains, entries = m.plane_entries, u = sizeof(gr_uint);
-  m.kept_plane_offsets.reserve(m.ctx, (n + 1) * u, m.largest);
-  check(clEnqueueCopyBuffer(m.queue, m.arrays[kPlaneOffsets].mem, m.kept_plane_offsets.mem, 0, 0,
-                            (n + 1) * u, 0, nullptr, nullptr),
-        "clEnqueueCopyBuffer");
-  if (entries > 0) {
-    m.kept_plane_which.reserve(m.ctx, entries * sizeof(int), m.largest);
-    check(clEnqueueCopyBuffer(m.queue, m.plane_collider.mem, m.kept_plane_which.mem, 0, 0,
-                              entries * sizeof(int), 0, nullptr, nullptr),
-          "clEnqueueCopyBuffer");
-  }
-  m.kept_planes_n = n;
-  m.kept_plane_entries = entries;
+  m.copy_plane_rows(m.kept_plane_offsets, m.kept_plane_which);
+  m.kept_planes_n = m.plane_grains;
+  m.kept_plane_entries = m.plane_entries;
 }
 
 }  // namespace grains::opencl

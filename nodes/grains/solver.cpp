@@ -834,10 +834,12 @@ static bool jacobi_chain(const GrainsSettings& s, bool rebuilds = false) {
 }
 
 // gauss_seidel's, and jacobi's where its substep chains on the device (jacobi_chain: its end
-// there, which the test's end follows there)
+// there, which the test's end follows there; with rebuilds during the iterations where they
+// are made there, rebuilds_chain)
 bool GrainsSolver::sleeps_on_device(const GrainsSettings& s, const ColliderState* colliders,
                                     size_t collider_count) {
-  if (!s.use_opencl || (s.contact_solver != kContactGaussSeidel && !jacobi_chain(s)) ||
+  if (!s.use_opencl ||
+      (s.contact_solver != kContactGaussSeidel && !jacobi_chain(s, rebuilds_chain(s))) ||
       s.host_finish || s.mass_shock() == MassShock::Global ||
       meshes_here(s, colliders, collider_count))
     return false;
@@ -935,9 +937,10 @@ void GrainsSolver::sleep_begin(SubstepContext& c) {
 // host's search of rows, host_p) brings it then.
 bool GrainsSolver::start_stays(const GrainsData& d, const GrainsSettings& s,
                                const ColliderState* colliders, size_t collider_count) {
-  // jacobi's: where its chain runs there (jacobi_chain; the shapes need primitives, the impact
-  // data keep the end here)
-  return s.use_opencl && (s.contact_solver == kContactGaussSeidel || jacobi_chain(s)) &&
+  // jacobi's: where its chain runs there (jacobi_chain, rebuilds_chain; the shapes need
+  // primitives, the impact data keep the end here)
+  return s.use_opencl &&
+         (s.contact_solver == kContactGaussSeidel || jacobi_chain(s, rebuilds_chain(s))) &&
          !s.resend_start && s.mass_shock() != MassShock::Global && d.prim_count == 0 &&
          !meshes_here(s, colliders, collider_count);
 }
@@ -1365,6 +1368,16 @@ bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s, bool rebuilds) {
 // (builds_contacts), its planes are found there (no mesh queried here), and no test switch
 // keeps them here. (Where the device then declines the first search, its buffers too small,
 // find_pairs refuses the substep.)
+// rebuilds_fit as the settings and the device say it for grains without primitives (no
+// constraints whose pairs are dropped here), which the node's sleeping test on the device and a
+// start held there need (grains_node.cpp)
+bool GrainsSolver::rebuilds_chain(const GrainsSettings& s) {
+  if (!s.use_opencl || s.host_rebuilds || s.fetch_plane_rows || s.fetch_rows || s.host_history)
+    return false;
+  return !s.update_neighbors_during_iterations ||
+         (open_device().builds_contacts() && open_device().shapes_there());
+}
+
 bool GrainsSolver::rebuilds_fit(const SubstepContext& c) {
   const GrainsSettings& s = c.s;
   if (s.host_rebuilds || s.fetch_plane_rows) return false;

@@ -615,6 +615,7 @@ class GrainsSolver {
   static bool jacobi_loop_there(const GrainsSettings& s, bool rebuilds = false);
   bool rebuilds_there(const SubstepContext& c);
   bool rebuilds_fit(const SubstepContext& c);
+  bool rebuilds_chain(const GrainsSettings& s);
   // the shapes as a device projects them (shape_arrays), into *out
   const opencl::ShapeArrays* shape_arrays_there(const SubstepContext& c, opencl::ShapeArrays* out);
   // ... and this substep's collider planes may stay there: no stage here reads them (no impact

@@ -23,6 +23,9 @@ struct BinScene {
   const char* probed = "probe";
   bool error_control = true;
   bool jacobi = false;  // contact_solver jacobi (else the default gauss_seidel)
+  // with jacobi: the rows and planes found again every iteration
+  // (update_*_during_iterations)
+  bool rebuilds = false;
   int frames = 8;
   const char* file = "bin.json";  // the graph's name, under tests/
 };
@@ -67,6 +70,10 @@ inline Graph bin_graph(const BinScene& b) {
       {"particle_separation", 0.02}, {"use_opencl", true}, {"friction_with_particles", 1}};
   if (!b.sleeping) grains["sleep_speed"] = 0;
   if (b.jacobi) grains["contact_solver"] = "jacobi";
+  if (b.rebuilds) {
+    grains["update_neighbors_during_iterations"] = true;
+    grains["update_collisions_during_iterations"] = true;
+  }
   nodes.push_back(
       {{"name", "grains"}, {"type", "grains"}, {"inputs", {"gravity"}}, {"params", grains}});
   std::string last = "grains";

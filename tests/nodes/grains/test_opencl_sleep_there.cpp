@@ -21,10 +21,11 @@ namespace {
 constexpr int kFrames = 36;
 
 Graph sleep_graph(bool error_control, bool pusher, const char* probe, const char* probed,
-                  bool jacobi, bool mesh) {
+                  bool jacobi, bool mesh, bool rebuilds) {
   test::BinScene b;
   b.pusher_mesh = mesh;
   b.jacobi = jacobi;
+  b.rebuilds = rebuilds;
   b.drop = 0.12;
   b.pusher = pusher;
   b.probe = probe;
@@ -64,9 +65,9 @@ struct Run {
 };
 
 Run run(bool error_control, bool pusher, const char* probe, const char* probed, bool host_sleep,
-        bool jacobi, bool mesh) {
+        bool jacobi, bool mesh, bool rebuilds) {
   test::ScopedEnv host("GRAINS_OPENCL_HOST_SLEEP", host_sleep ? "1" : "0");
-  Simulation sim(sleep_graph(error_control, pusher, probe, probed, jacobi, mesh), 1);
+  Simulation sim(sleep_graph(error_control, pusher, probe, probed, jacobi, mesh, rebuilds), 1);
   Run r;
   for (int f = 0; f < kFrames; ++f) {
     sim.step_frame();
@@ -94,8 +95,9 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
   // for bit. The device makes every substep's test, those of the ball's sweep too; where no
   // other node reads them, each substep but a frame's first starts from the end held there.
   // With contact_solver jacobi too (its substep chained on the device, jacobi_on_device), with
-  // error control and the ball; and the ball as a mesh (a lumpy closed one, whose queries the
-  // device makes too: engine/mesh_query.h).
+  // error control and the ball, and with its rows and planes found again every iteration (there
+  // too, rebuilds_chain); and the ball as a mesh (a lumpy closed one, whose queries the device
+  // makes too: engine/mesh_query.h).
   register_builtin_nodes();
   struct Case {
     bool control, pusher;
@@ -103,6 +105,7 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
     const char* probed = "probe";
     bool jacobi = false;
     bool mesh = false;
+    bool rebuilds = false;
   };
   // halves every grain's sleeptime from 0.9 s to 0.95 s, else writes it back as it was
   const char* halve = "$ST > 0.9 && $ST < 0.95 ? @sleeptime * 0.5 : @sleeptime";
@@ -110,13 +113,17 @@ TEST_CASE("use_opencl: the sleeping test made on the device decides as the host'
        {Case{true, false, nullptr}, Case{false, false, nullptr}, Case{true, true, nullptr},
         Case{true, false, "$TX"}, Case{false, false, halve, "sleeptime"},
         Case{true, true, nullptr, "probe", true},
+        Case{true, true, nullptr, "probe", true, false, true},
         Case{true, true, nullptr, "probe", false, true}}) {
     INFO("error control " << c.control << ", pusher " << c.pusher << ", probe "
                           << (c.probe ? c.probe : "none") << " into " << c.probed
-                          << (c.jacobi ? ", jacobi" : "") << (c.mesh ? ", a mesh pusher" : ""));
+                          << (c.jacobi ? ", jacobi" : "") << (c.rebuilds ? ", rebuilds" : "")
+                          << (c.mesh ? ", a mesh pusher" : ""));
     const bool edits = std::string(c.probed) == "sleeptime";
-    const Run host = run(c.control, c.pusher, c.probe, c.probed, true, c.jacobi, c.mesh);
-    const Run device = run(c.control, c.pusher, c.probe, c.probed, false, c.jacobi, c.mesh);
+    const Run host =
+        run(c.control, c.pusher, c.probe, c.probed, true, c.jacobi, c.mesh, c.rebuilds);
+    const Run device =
+        run(c.control, c.pusher, c.probe, c.probed, false, c.jacobi, c.mesh, c.rebuilds);
     for (size_t f = 0; f < host.frames.size(); ++f) {
       INFO("frame " << f + 1);
       const Frame& a = host.frames[f];

@@ -1363,29 +1363,29 @@ bool GrainsSolver::jacobi_loop_there(const GrainsSettings& s, bool rebuilds) {
 }
 
 // Whether the rows and planes found again during the iterations (update_*_during_iterations)
-// will be found there (rebuilds_there), as the substep knows it before its search: its rows may
-// stay there (rows_stay) on a device that finds them (double precision) and builds them
-// (builds_contacts), its planes are found there (no mesh queried here), and no test switch
-// keeps them here. (Where the device then declines the first search, its buffers too small,
-// find_pairs refuses the substep.)
-// rebuilds_fit as the settings and the device say it for grains without primitives (no
-// constraints whose pairs are dropped here), which the node's sleeping test on the device and a
-// start held there need (grains_node.cpp)
+// will be found there (rebuilds_there), as the substep knows it before its search: what the
+// settings and the device say (rebuilds_chain), its rows may stay there (rows_stay: no
+// constrained pairs dropped here) and its planes are found there (no mesh queried here).
+// (Where the device then declines the first search, its buffers too small, find_pairs refuses
+// the substep.)
+bool GrainsSolver::rebuilds_fit(const SubstepContext& c) {
+  const GrainsSettings& s = c.s;
+  return rebuilds_chain(s) &&
+         !(s.update_neighbors_during_iterations && c.pairs_on && !rows_stay(c)) &&
+         !(s.update_collisions_during_iterations && c.colliders_on &&
+           meshes_here(s, c.colliders, c.collider_count));
+}
+
+// rebuilds_fit as the settings and the device say it, whatever the grains: no test switch keeps
+// the rebuilds or what they read here, and the device finds rows (double precision) and builds
+// them (builds_contacts). For grains without primitives (no constraints), which the node's
+// sleeping test on the device and a start held there need (grains_node.cpp), it is all of it
+// but a mesh queried here, which those exclude themselves.
 bool GrainsSolver::rebuilds_chain(const GrainsSettings& s) {
   if (!s.use_opencl || s.host_rebuilds || s.fetch_plane_rows || s.fetch_rows || s.host_history)
     return false;
   return !s.update_neighbors_during_iterations ||
          (open_device().builds_contacts() && open_device().shapes_there());
-}
-
-bool GrainsSolver::rebuilds_fit(const SubstepContext& c) {
-  const GrainsSettings& s = c.s;
-  if (s.host_rebuilds || s.fetch_plane_rows) return false;
-  if (s.update_neighbors_during_iterations && c.pairs_on &&
-      !(rows_stay(c) && open_device().builds_contacts() && open_device().shapes_there()))
-    return false;
-  return !(s.update_collisions_during_iterations && c.colliders_on &&
-           meshes_here(s, c.colliders, c.collider_count));
 }
 
 bool GrainsSolver::jacobi_planes_stay(const SubstepContext& c) const {

@@ -46,7 +46,6 @@ void Iterations::find_planes(const gr_collider* colliders, size_t count, const f
   if (!kept) m.upload_once(Pb, P, 3 * n * f, (3 * n + 1) * f);
   p_there = p_there && m.p_taken && m.p_taken_n == n;
   Buffer& pb = p_there ? *m.p_taken : m.plane_p;
-  radius_there = radius_there && !m.rebuilding;
   Buffer& rb = radius_there ? m.nb_radius : own(kRadius, m.rebuild_radius, radius, n * f);
   if (!p_there) m.upload(pb, p, 3 * n * f);
   if (!radius_there) {
